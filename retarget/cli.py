@@ -1,0 +1,75 @@
+"""The ``retarget`` command line. Each subcommand lives in ``retarget/commands/<name>.py`` and
+provides ``HELP`` (one line), ``EXAMPLE`` (shown in ``--help``), ``add_arguments(parser)`` and
+``run(args) -> int``. Modules are imported lazily so ``retarget --help`` stays fast."""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from .errors import RetargetError
+
+# subcommand name -> module under retarget.commands
+COMMANDS = {
+    "demo": "demo",
+    "synth": "synth",
+    "train": "train",
+    "transfer": "transfer",
+    "animate": "animate",
+    "invert": "invert",
+    "export-rig": "export_rig",
+    "eval": "eval",
+    "bench": "bench",
+    "calibrate": "calibrate",
+}
+
+
+def _available():
+    """(name, module) for every subcommand whose module exists."""
+    out = []
+    for name, mod in COMMANDS.items():
+        try:
+            out.append((name, importlib.import_module(f"retarget.commands.{mod}")))
+        except ModuleNotFoundError as e:
+            if e.name != f"retarget.commands.{mod}":
+                raise
+    return out
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="retarget",
+        description="Mesh-agnostic facial expression retargeting (Neural Face Skinning).",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, module in _available():
+        p = sub.add_parser(
+            name,
+            help=module.HELP,
+            description=module.HELP,
+            epilog="example:\n  " + module.EXAMPLE.strip().replace("\n", "\n  "),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "_run", None):
+        parser.print_help()
+        return 1
+    try:
+        return int(args._run(args) or 0)
+    except RetargetError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
