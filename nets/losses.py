@@ -1,0 +1,192 @@
+"""Training losses of Neural Face Skinning (Cha et al. 2025, section 3.3-3.4, eq. 2-9).
+
+Pure functions on tensors. Vertex arrays are (..., V, 3) with any leading batch dims, in the
+canonical units the caller trains in (so a vertex loss is in those units squared). Every loss is a
+scalar; the reduction is stated in each docstring.
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+_EPS = 1e-12
+
+
+def vertex_loss(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
+    """L_v = ||v - v_GT||² (eq. 3): squared Euclidean distance, mean over vertices (and batch).
+
+    pred, gt: (..., V, 3). A constant offset d gives |d|².
+    """
+    return (pred - gt).pow(2).sum(-1).mean()
+
+
+def face_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """Area-weighted face normals: (v1 - v0) × (v2 - v0), length = 2·area.
+
+    verts (..., V, 3), faces (F, 3) int64 -> (..., F, 3).
+    """
+    v0, v1, v2 = (verts[..., faces[:, i], :] for i in range(3))
+    return torch.linalg.cross(v1 - v0, v2 - v0, dim=-1)
+
+
+def vertex_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """Unit vertex normals, the area-weighted sum of the incident faces' normals (differentiable).
+
+    verts (..., V, 3), faces (F, 3) int64 -> (..., V, 3); isolated vertices get zero normals.
+    """
+    fn = face_normals(verts, faces)
+    n = torch.zeros_like(verts)
+    for i in range(3):
+        n = n.index_add(-2, faces[:, i], fn)
+    return n / n.norm(dim=-1, keepdim=True).clamp_min(_EPS)
+
+
+def normal_loss(pred: torch.Tensor, gt: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """L_n = ||n - n_GT||² (eq. 3) between unit vertex normals of the predicted and GT meshes.
+
+    pred, gt: (..., V, 3) deformed vertices; faces (F, 3). Mean over vertices (and batch) of the
+    squared distance of the unit normals (dimensionless, in [0, 4]).
+    """
+    return vertex_loss(vertex_normals(pred, faces), vertex_normals(gt, faces))
+
+
+def triangle_frames(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """Sumner–Popović frame of every triangle: columns [v1 - v0, v2 - v0, n / sqrt(|n|)].
+
+    n = (v1 - v0) × (v2 - v0); the third column is the offset of the "fourth vertex" that makes the
+    triangle a tetrahedron, scaled so that it has the units of an edge.
+    verts (..., V, 3), faces (F, 3) -> (..., F, 3, 3).
+    """
+    v0, v1, v2 = (verts[..., faces[:, i], :] for i in range(3))
+    e1, e2 = v1 - v0, v2 - v0
+    n = torch.linalg.cross(e1, e2, dim=-1)
+    n = n / n.norm(dim=-1, keepdim=True).clamp_min(_EPS).sqrt()
+    return torch.stack([e1, e2, n], dim=-1)
+
+
+def deformation_gradients(verts: torch.Tensor, rest: torch.Tensor,
+                          faces: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-face deformation Jacobians J = V_def · V_rest⁻¹ (Sumner & Popović 2004).
+
+    Args:
+        verts: (..., V, 3) deformed vertices.
+        rest: (V, 3) rest (neutral) vertices.
+        faces: (F, 3) int64.
+    Returns:
+        J (..., F, 3, 3), and valid (F,) bool: faces whose rest area exceeds 1e-6 of the mean
+        rest face area (J is set to 0 on the others, whose rest frame is singular).
+    """
+    frames = triangle_frames(rest, faces)
+    area2 = torch.linalg.cross(frames[..., 0], frames[..., 1], dim=-1).norm(dim=-1)
+    valid = area2 > 1e-6 * area2.mean()
+    eye = torch.eye(3, dtype=rest.dtype, device=rest.device)
+    inv = torch.linalg.inv(torch.where(valid[:, None, None], frames, eye))
+    return triangle_frames(verts, faces) @ (inv * valid[:, None, None]), valid
+
+
+def jacobian_loss(pred: torch.Tensor, gt: torch.Tensor, rest: torch.Tensor,
+                  faces: torch.Tensor) -> torch.Tensor:
+    """L_g = ||g - g_GT||² (eq. 3) between per-face deformation Jacobians (rest -> deformed).
+
+    pred, gt: (..., V, 3) deformed vertices; rest (V, 3) the neutral mesh; faces (F, 3).
+    Squared Frobenius norm of J_pred - J_GT, mean over non-degenerate faces (and batch);
+    dimensionless, invariant to translating pred or gt, zero when pred = gt + t.
+    """
+    j_pred, valid = deformation_gradients(pred, rest, faces)
+    j_gt, _ = deformation_gradients(gt, rest, faces)
+    per_face = (j_pred - j_gt).pow(2).sum((-2, -1))
+    return per_face[..., valid].mean()
+
+
+def decoder_loss(pred: torch.Tensor, gt: torch.Tensor, rest: torch.Tensor, faces: torch.Tensor,
+                 lambda_v: float = 10.0, lambda_n: float = 1.0, lambda_g: float = 1.0
+                 ) -> dict[str, torch.Tensor]:
+    """L_dec = λ_v L_v + λ_n L_n + λ_g L_g (eq. 3; the paper's weights 10, 1, 1).
+
+    pred, gt: (..., V, 3) predicted and GT deformed meshes (rest + Δv), rest (V, 3), faces (F, 3)
+    (decode every vertex of the faces given; a vertex subset needs its faces re-indexed to it).
+    Returns {"L_v", "L_n", "L_g", "L_dec"} scalars.
+    """
+    parts = {"L_v": vertex_loss(pred, gt), "L_n": normal_loss(pred, gt, faces),
+             "L_g": jacobian_loss(pred, gt, rest, faces)}
+    parts["L_dec"] = lambda_v * parts["L_v"] + lambda_n * parts["L_n"] + lambda_g * parts["L_g"]
+    return parts
+
+
+def supervised_code_loss(z: torch.Tensor, z_gt: torch.Tensor) -> torch.Tensor:
+    """||z[:K] - z_GT||² + ||z[K:]||² (eq. 4): the first K dims follow the K true coefficients and
+    the extra dims go to zero. z (..., D), z_gt (..., K) with K <= D. Mean over the D dims (and
+    batch).
+    """
+    k = z_gt.shape[-1]
+    if k > z.shape[-1]:
+        raise ValueError(f"{k} true coefficients do not fit a {z.shape[-1]}-dim code")
+    return (z[..., :k] - z_gt).pow(2).sum(-1).add(z[..., k:].pow(2).sum(-1)).mean() / z.shape[-1]
+
+
+def identity_loss(z_id: torch.Tensor, identity_gt: torch.Tensor) -> torch.Tensor:
+    """L_ID (eq. 4): z_id (..., 128) vs the J identity coefficients (..., J); mean over 128 dims."""
+    return supervised_code_loss(z_id, identity_gt)
+
+
+def expression_loss(z_ge: torch.Tensor, weights_gt: torch.Tensor) -> torch.Tensor:
+    """L_Exp (eq. 4): z_ge (..., 128) vs the 53 true FACS weights (..., 53); mean over 128 dims."""
+    return supervised_code_loss(z_ge, weights_gt)
+
+
+def blend(weights: torch.Tensor, basis: torch.Tensor) -> torch.Tensor:
+    """Blendshape displacement w · B: weights (..., K), basis (K, V, 3) -> (..., V, 3)."""
+    return torch.einsum("...k,kvc->...vc", weights, basis)
+
+
+def blendshape_projection_loss(z_ge: torch.Tensor, weights_gt: torch.Tensor,
+                               basis: torch.Tensor) -> torch.Tensor:
+    """L_BP = ||z_GE[:53] · B - w_GT · B||² (eq. 7), trains the expression encoder.
+
+    z_ge (..., 128) predicted codes, weights_gt (..., 53) true weights, basis (53, V, 3) the
+    source rig's blendshape deltas. Squared distance, mean over vertices (and batch), units².
+    """
+    k = basis.shape[0]
+    return vertex_loss(blend(z_ge[..., :k] - weights_gt, basis), torch.zeros_like(basis[0]))
+
+
+def blendshape_reconstruction_loss(model, feat: torch.Tensor, c: torch.Tensor, codes,
+                                   z_ge: torch.Tensor, basis: torch.Tensor,
+                                   rows: torch.Tensor | None = None) -> torch.Tensor:
+    """L_BR = ||sg(z_GE[:53]) · B - D(Ψ(sg(z_GE), z_Skin))||² (eq. 8), trains the decoder.
+
+    The stop-gradient is applied here, so the expression encoder gets no gradient from L_BR; the
+    decoder, skinning block and target codes do.
+
+    Args:
+        model: an ``NFSModel``.
+        feat, c, codes: the mesh the rig ``basis`` lives on: features (V, 6), image code, and its
+            ``model.encode_target`` codes.
+        z_ge: (code_dim,) or (S, code_dim) predicted expression codes.
+        basis: (53, V, 3) blendshape deltas of that mesh.
+        rows: (n,) int64 vertices to decode, or None for all.
+    Returns:
+        Squared distance, mean over decoded vertices (and the S codes), units².
+    """
+    z_sg = z_ge.detach().reshape(-1, z_ge.shape[-1])
+    sub = basis if rows is None else basis[:, rows]
+    dv = torch.stack([model.decode_target(feat, c, codes, z, rows) for z in z_sg])
+    return vertex_loss(dv, blend(z_sg[:, :basis.shape[0]], sub))
+
+
+def segmentation_nll(z_skin: torch.Tensor, labels: torch.Tensor) -> torch.Tensor:
+    """L_nll (eq. 2): binary cross-entropy of z_Skin against one-hot segment labels.
+
+    z_skin (V, L) in (0, 1); labels (V,) int64 in [0, L). Sum over the L segments, mean over
+    vertices (the 1/N of eq. 2).
+    """
+    y = F.one_hot(labels, z_skin.shape[-1]).to(z_skin.dtype)
+    return F.binary_cross_entropy(z_skin, y, reduction="sum") / z_skin.shape[0]
+
+
+def code_range_loss(z: torch.Tensor) -> torch.Tensor:
+    """L_reg (eq. 5, from NFR): -z below 0, z - 1 above 1, 0 inside [0, 1]; mean over all entries.
+
+    z (..., D) codes of samples without rig labels (the caller picks which dims to constrain).
+    """
+    return (F.relu(-z) + F.relu(z - 1.0)).mean()

@@ -1,0 +1,378 @@
+"""The Neural Face Skinning network (Cha et al. 2025, section 3.1, Figure 4).
+
+Inputs are a source mesh M_src (or FACS weights) and a target neutral mesh M_tgt; the output is a
+displacement Δv (V_tgt, 3) for every target vertex, in the canonical units of the vertex features.
+
+- image code c = CNN(frontal render) ∈ R^128, concatenated to every vertex feature v ∈ R^6
+  (canonical position + unit normal);
+- identity encoder: DiffusionNet on M_tgt, area-weighted mean -> z_ID ∈ R^128 (first J dims
+  supervised by the identity coefficients);
+- expression encoder: DiffusionNet on M_src, mean -> z_GE ∈ R^128 (first 53 dims = FACS weights);
+- skinning encoder: DiffusionNet on M_tgt, per vertex, sigmoid -> z_Skin ∈ (0, 1)^L;
+- skinning block: MLP z_Skin -> ω_Skin ∈ R^128 per vertex, z_LE = ω_Skin ⊙ z_GE;
+- decoder: per-vertex MLP of 8 linear layers (GroupNorm + ReLU after all but the last) on
+  [v_tgt, c_tgt, z_ID, z_LE] -> Δv.
+
+Choices the paper leaves open (see ``NFSConfig``): one CNN shared by all encoders and the decoder
+(the paper gives each encoder its own CNN; sharing lets the target image be encoded once); the
+GroupNorm of the decoder normalises each vertex over channel groups (never across vertices), so
+every vertex is decoded independently; ω_Skin has no output activation.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import torch
+from torch import nn
+
+from .cnn import FrontalCNN, group_norm
+from .diffusion_net import DiffusionNet
+
+VERTEX_FEATURE_DIM = 6  # canonical position (3) + unit vertex normal (3)
+
+
+@dataclass(frozen=True)
+class NFSConfig:
+    """Every dimension and switch of ``NFSModel``; plain types only (checkpoint friendly).
+
+    Attributes:
+        code_dim: size of z_ID, z_GE, z_LE and ω_Skin (128 in the paper).
+        image_code_dim: size of the image code c (128 in the paper).
+        n_facs: FACS weights carried by the first dims of z_GE (53, ICT-FaceKit order).
+        n_identity: J, identity coefficients supervising the first dims of z_ID (the model does not
+            use it; the identity loss does). Pass ``data_synth.identity.N_IDENTITY``.
+        image_size: H = W of the frontal renders, pixels.
+        image_channels: channels of the frontal renders (e.g. 2 = shaded + depth).
+        cnn_width: channels of the first CNN convolution.
+        enc_width: DiffusionNet width of the three encoders.
+        enc_blocks: DiffusionNet blocks of each encoder.
+        k_eig: Laplacian eigenpairs the operators must provide (the spectral diffusion basis).
+        dropout: DiffusionNet dropout probability.
+        n_segments: L, segmentation labels = channels of z_Skin (6, 14, 20 or 24 in the paper).
+        skin_hidden: hidden width of the skinning block MLP.
+        skin_layers: linear layers of the skinning block MLP (ReLU between them).
+        decoder_width: hidden width of the decoder.
+        decoder_layers: linear layers of the decoder (8 in the paper).
+        norm_groups: GroupNorm groups in the decoder and the CNN.
+        use_skinning: False = the "without skinning encoder" ablation (NFR-like): no skinning
+            encoder or block, the decoder takes z_GE broadcast to every vertex.
+    """
+
+    code_dim: int = 128
+    image_code_dim: int = 128
+    n_facs: int = 53
+    n_identity: int = 50
+    image_size: int = 64
+    image_channels: int = 2
+    cnn_width: int = 16
+    enc_width: int = 64
+    enc_blocks: int = 4
+    k_eig: int = 64
+    dropout: float = 0.0
+    n_segments: int = 20
+    skin_hidden: int = 64
+    skin_layers: int = 3
+    decoder_width: int = 128
+    decoder_layers: int = 8
+    norm_groups: int = 8
+    use_skinning: bool = True
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.type == "bool":
+                ok = isinstance(value, bool)
+            elif f.type == "float":
+                ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            else:
+                ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
+            if not ok:
+                raise ValueError(f"NFSConfig.{f.name}: expected a {f.type}"
+                                 f"{' >= 1' if f.type == 'int' else ''}, got {value!r}")
+        if self.n_facs > self.code_dim or self.n_identity > self.code_dim:
+            raise ValueError(f"NFSConfig: n_facs ({self.n_facs}) and n_identity ({self.n_identity}) "
+                             f"must not exceed code_dim ({self.code_dim})")
+        if self.decoder_layers < 2:
+            raise ValueError(f"NFSConfig.decoder_layers must be >= 2, got {self.decoder_layers}")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"NFSConfig.dropout must be in [0, 1), got {self.dropout}")
+
+    @classmethod
+    def preset(cls, name: str, **overrides: Any) -> "NFSConfig":
+        """A named configuration, optionally with fields replaced.
+
+        - ``"paper"``: the paper's sizes where it states them (codes 128, DiffusionNet width 256 with
+          4 blocks, 8 decoder layers) and the authors' public code's otherwise (decoder and
+          skinning-block width 256, GroupNorm 32 groups); 256² renders, k = 128. The CNN width (32)
+          is our choice, as is dropout 0 in every preset.
+        - ``"cpu"``: the defaults (DiffusionNet width 64 with 4 blocks, decoder width 128, 64²
+          renders, k = 64, 0.62 M parameters), sized for training on a 2-core CPU in about two
+          hours: one thread, one target with 8 sources and 1000 decoded vertices, forward +
+          backward + AdamW step took 73 ms per sample at 2.5k target vertices and 237 ms at 10k.
+        - ``"tiny"``: for tests (widths 16, 1 block, 32² renders, k = 16).
+        """
+        if name not in _PRESETS:
+            raise ValueError(f"unknown NFSConfig preset {name!r}; choose one of {sorted(_PRESETS)}")
+        return cls.from_dict({**_PRESETS[name], **overrides})
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict of ints, floats and bools (loadable with ``torch.load(weights_only=True)``)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "NFSConfig":
+        """Inverse of ``to_dict``; missing keys take the defaults, unknown keys raise ValueError."""
+        unknown = sorted(set(d) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise ValueError(f"NFSConfig: unknown keys {unknown} (a checkpoint or config from "
+                             f"another version?)")
+        return cls(**d)
+
+
+_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": dict(image_size=256, cnn_width=32, enc_width=256, enc_blocks=4, k_eig=128,
+                  skin_hidden=256, decoder_width=256, norm_groups=32),
+    "cpu": {},
+    "tiny": dict(image_size=32, cnn_width=8, enc_width=16, enc_blocks=1, k_eig=16,
+                 skin_hidden=16, decoder_width=16, norm_groups=4),
+}
+
+
+def weights_to_code(w: torch.Tensor, code_dim: int = 128) -> torch.Tensor:
+    """FACS weights -> expression code for driving the decoder: z_GE = [w, 0].
+
+    Args:
+        w: (..., 53) float, ICT-FaceKit order, nominally in [0, 1].
+        code_dim: size of z_GE.
+    Returns:
+        (..., code_dim) with the weights in the first dims and zeros in the rest.
+    """
+    if w.shape[-1] > code_dim:
+        raise ValueError(f"weights_to_code: {w.shape[-1]} weights do not fit a {code_dim}-dim code")
+    return torch.cat([w, w.new_zeros(*w.shape[:-1], code_dim - w.shape[-1])], dim=-1)
+
+
+def _chunks(n: int, chunk: int | None) -> list[slice]:
+    """Consecutive slices covering range(n), each of at most ``chunk`` items (None = one slice)."""
+    if chunk is not None and chunk < 1:
+        raise ValueError(f"decode: chunk must be >= 1, got {chunk}")
+    step = n if chunk is None else chunk
+    return [slice(i, min(i + step, n)) for i in range(0, n, max(step, 1))]
+
+
+def mlp(dims: Sequence[int], norm_groups: int | None = None) -> nn.Sequential:
+    """Linear layers ``dims[0] -> dims[1] -> ... -> dims[-1]`` applied to the last axis.
+
+    After every layer but the last: GroupNorm (when ``norm_groups`` is given) and ReLU.
+    On (N, C) inputs each row is processed independently.
+    """
+    layers: list[nn.Module] = []
+    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        layers.append(nn.Linear(a, b))
+        if i < len(dims) - 2:
+            if norm_groups is not None:
+                layers.append(group_norm(b, norm_groups))
+            layers.append(nn.ReLU(inplace=True))
+    return nn.Sequential(*layers)
+
+
+@dataclass
+class TargetCodes:
+    """What NFS computes once per target mesh and reuses for every source expression.
+
+    Attributes:
+        z_id: (code_dim,) identity code z_ID.
+        z_skin: (V, L) skinning feature z_Skin in (0, 1), or None without skinning.
+        omega_skin: (V, code_dim) skinning weights ω_Skin, cached for all the target's
+            expressions; None without skinning, or to have ``local_code`` compute ω_Skin from
+            z_skin chunk by chunk (no (V, code_dim) array kept, for huge meshes).
+    """
+
+    z_id: torch.Tensor
+    z_skin: torch.Tensor | None
+    omega_skin: torch.Tensor | None
+
+
+class NFSModel(nn.Module):
+    """Neural Face Skinning: encoders, skinning block and per-vertex decoder (see module doc).
+
+    Every method takes one mesh at a time: ``feat`` (V, 6) float32 canonical position + unit normal,
+    ``c`` (image_code_dim,) the image code of that mesh's neutral render, ``ops`` its
+    ``nets.geometry.TorchOperators`` (with at least ``cfg.k_eig`` eigenpairs).
+    """
+
+    def __init__(self, cfg: NFSConfig):
+        super().__init__()
+        self.cfg = cfg
+        c_in = VERTEX_FEATURE_DIM + cfg.image_code_dim
+        self.cnn = FrontalCNN(cfg.image_channels, cfg.image_size, cfg.image_code_dim, cfg.cnn_width,
+                              cfg.norm_groups)
+        self.identity_encoder = DiffusionNet(c_in, cfg.code_dim, cfg.enc_width, cfg.enc_blocks,
+                                             cfg.dropout, outputs="global_mean")
+        self.expression_encoder = DiffusionNet(c_in, cfg.code_dim, cfg.enc_width, cfg.enc_blocks,
+                                               cfg.dropout, outputs="global_mean")
+        if cfg.use_skinning:
+            self.skinning_encoder = DiffusionNet(c_in, cfg.n_segments, cfg.enc_width,
+                                                 cfg.enc_blocks, cfg.dropout, outputs="vertices",
+                                                 last_activation=torch.sigmoid)
+            self.skinning_mlp = mlp([cfg.n_segments]
+                                    + [cfg.skin_hidden] * (cfg.skin_layers - 1) + [cfg.code_dim])
+        self.decoder = mlp([c_in + 2 * cfg.code_dim]
+                           + [cfg.decoder_width] * (cfg.decoder_layers - 1) + [3], cfg.norm_groups)
+
+    # ----------------------------------------------------------------------------- encoders
+    def image_code(self, img: torch.Tensor) -> torch.Tensor:
+        """Frontal renders (B, C, H, W) float32 in [0, 1] -> image codes c (B, image_code_dim)."""
+        return self.cnn(img)
+
+    def _encoder_input(self, feat: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+        """[v, c] per vertex: feat (V, 6), c (image_code_dim,) -> (V, 6 + image_code_dim)."""
+        if feat.dim() != 2 or feat.shape[1] != VERTEX_FEATURE_DIM:
+            raise ValueError(f"vertex features must be (V, {VERTEX_FEATURE_DIM}); got "
+                             f"{tuple(feat.shape)}")
+        if c.shape != (self.cfg.image_code_dim,):
+            raise ValueError(f"image code c must be ({self.cfg.image_code_dim},); got "
+                             f"{tuple(c.shape)} (use image_code(img)[0] for one image)")
+        return torch.cat([feat, c.expand(feat.shape[0], -1)], dim=1)
+
+    def encode_identity(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
+        """Identity encoder on a neutral mesh -> z_ID (code_dim,) (area-weighted vertex mean)."""
+        return self.identity_encoder(self._encoder_input(feat, c), ops)
+
+    def encode_expression(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
+        """Expression encoder on an expression mesh -> z_GE (code_dim,); z_GE[:53] = FACS weights.
+
+        ``c`` is the image code of the mesh's *neutral* render and ``ops`` may be the neutral's
+        operators, as in the paper.
+        """
+        return self.expression_encoder(self._encoder_input(feat, c), ops)
+
+    def encode_skinning(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
+        """Skinning encoder on a neutral mesh -> z_Skin (V, L) in (0, 1) (sigmoid, for eq. 2 BCE)."""
+        self._require_skinning()
+        return self.skinning_encoder(self._encoder_input(feat, c), ops)
+
+    def skinning_weights(self, z_skin: torch.Tensor) -> torch.Tensor:
+        """Skinning block MLP: z_Skin (V, L) -> ω_Skin (V, code_dim) (no output activation)."""
+        self._require_skinning()
+        return self.skinning_mlp(z_skin)
+
+    def skinning_block(self, z_skin: torch.Tensor, z_ge: torch.Tensor) -> torch.Tensor:
+        """Skinning block Ψ: z_LE = ω_Skin ⊙ z_GE; z_skin (V, L), z_ge (code_dim,) -> (V, code_dim)."""
+        return self.skinning_weights(z_skin) * z_ge
+
+    def encode_target(self, feat: torch.Tensor, c: torch.Tensor, ops) -> TargetCodes:
+        """z_ID, z_Skin and ω_Skin of a target neutral mesh, computed once for all its expressions."""
+        z_id = self.encode_identity(feat, c, ops)
+        if not self.cfg.use_skinning:
+            return TargetCodes(z_id, None, None)
+        z_skin = self.encode_skinning(feat, c, ops)
+        return TargetCodes(z_id, z_skin, self.skinning_weights(z_skin))
+
+    def local_code(self, codes: TargetCodes, z_ge: torch.Tensor,
+                   rows: torch.Tensor | slice | None = None) -> torch.Tensor:
+        """The decoder's expression input on the target: z_LE (n, code_dim) = ω_Skin[rows] ⊙ z_GE,
+        or z_GE (code_dim,) itself without skinning (the decoder broadcasts it).
+
+        rows: (n,) int64 vertex indices or a slice, None for all V vertices. When
+        ``codes.omega_skin`` is None, ω_Skin is computed from ``codes.z_skin`` for these rows only
+        (no (V, code_dim) array is kept: the low-memory path for huge meshes).
+        """
+        if not self.cfg.use_skinning:
+            return z_ge
+        pick = (lambda a: a) if rows is None else (lambda a: a[rows])
+        if codes.omega_skin is not None:
+            return pick(codes.omega_skin) * z_ge
+        return self.skinning_block(pick(codes.z_skin), z_ge)
+
+    # ----------------------------------------------------------------------------- decoder
+    def decode(self, feat: torch.Tensor, c: torch.Tensor, z_id: torch.Tensor, z_code: torch.Tensor,
+               chunk: int | None = None) -> torch.Tensor:
+        """Per-vertex decoder D: [v, c, z_ID, z_code] -> Δv.
+
+        Args:
+            feat: (V, 6) target vertex features (any subset of the target's rows).
+            c: (image_code_dim,) target image code.
+            z_id: (code_dim,) target identity code z_ID.
+            z_code: (V, code_dim) z_LE, or (code_dim,) z_GE broadcast to all rows (no skinning).
+            chunk: decode at most this many vertices at a time; the same result, and under
+                ``torch.no_grad`` the working memory is that of one chunk.
+        Returns:
+            (V, 3) float32 displacement Δv in the units of ``feat``'s positions.
+        """
+        n, d = feat.shape[0], self.cfg.code_dim
+        if z_id.shape != (d,) or z_code.shape not in ((n, d), (d,)):
+            raise ValueError(f"decode: z_id must be ({d},) and z_code ({n}, {d}) or ({d},); got "
+                             f"{tuple(z_id.shape)} and {tuple(z_code.shape)}")
+        out = []
+        for rows in _chunks(n, chunk):
+            m = rows.stop - rows.start
+            code = z_code[rows] if z_code.dim() == 2 else z_code.expand(m, -1)
+            x = self._encoder_input(feat[rows], c)
+            out.append(self.decoder(torch.cat([x, z_id.expand(m, -1), code], dim=1)))
+        return torch.cat(out) if out else feat.new_zeros(0, 3)
+
+    def decode_target(self, feat: torch.Tensor, c: torch.Tensor, codes: TargetCodes,
+                      z_ge: torch.Tensor, rows: torch.Tensor | None = None,
+                      chunk: int | None = None) -> torch.Tensor:
+        """D(Ψ(z_GE, z_Skin)) on a target: Δv (n, 3) for expression code z_ge (code_dim,).
+
+        ``feat`` (V, 6) and ``c`` are the target's, ``codes`` from ``encode_target``; rows (n,) int64
+        selects the vertices to decode (None = all); ``chunk`` as in ``decode`` (z_LE is formed
+        chunk by chunk too). Drive from FACS weights with ``z_ge = weights_to_code(w)``.
+        """
+        n = feat.shape[0] if rows is None else rows.shape[0]
+        out = []
+        for part in _chunks(n, chunk):
+            idx = part if rows is None else rows[part]
+            out.append(self.decode(feat[idx], c, codes.z_id, self.local_code(codes, z_ge, idx)))
+        return torch.cat(out) if out else feat.new_zeros(0, 3)
+
+    # ----------------------------------------------------------------------------- training
+    def forward_group(self, tgt_feat: torch.Tensor, tgt_c: torch.Tensor, tgt_ops,
+                      src_feats: Sequence[torch.Tensor], src_cs: Sequence[torch.Tensor],
+                      src_ops: Sequence, vertex_subset: torch.Tensor | None = None
+                      ) -> dict[str, torch.Tensor | None]:
+        """Retarget S source meshes onto one target, encoding the target once.
+
+        Args:
+            tgt_feat, tgt_c, tgt_ops: the target neutral mesh (V, 6), (image_code_dim,), operators.
+            src_feats, src_cs, src_ops: S source expression meshes (V_s, 6), their neutral's image
+                codes and operators.
+            vertex_subset: (n,) int64 target vertex indices to decode, or None for all V.
+        Returns:
+            dict with z_ID (code_dim,), z_Skin (V, L) | None, z_GE (S, code_dim),
+            z_LE (S, n, code_dim) | None, dv (S, n, 3).
+        """
+        if not len(src_feats) == len(src_cs) == len(src_ops) >= 1:
+            raise ValueError("forward_group: need the same number (>= 1) of source features, "
+                             "image codes and operators")
+        codes = self.encode_target(tgt_feat, tgt_c, tgt_ops)
+        sub = tgt_feat if vertex_subset is None else tgt_feat[vertex_subset]
+        z_ge = torch.stack([self.encode_expression(f, c, o)
+                            for f, c, o in zip(src_feats, src_cs, src_ops)])
+        z_code = [self.local_code(codes, g, vertex_subset) for g in z_ge]
+        dv = torch.stack([self.decode(sub, tgt_c, codes.z_id, code) for code in z_code])
+        return {"z_ID": codes.z_id, "z_Skin": codes.z_skin, "z_GE": z_ge,
+                "z_LE": torch.stack(z_code) if self.cfg.use_skinning else None, "dv": dv}
+
+    def forward_pair(self, src_feat: torch.Tensor, src_c: torch.Tensor, src_ops,
+                     tgt_feat: torch.Tensor, tgt_c: torch.Tensor, tgt_ops,
+                     vertex_subset: torch.Tensor | None = None) -> dict[str, torch.Tensor | None]:
+        """Retarget one source mesh onto one target: ``forward_group`` with S = 1, squeezed.
+
+        Returns dict with z_ID (code_dim,), z_GE (code_dim,), z_Skin (V, L) | None,
+        z_LE (n, code_dim) | None, dv (n, 3).
+        """
+        out = self.forward_group(tgt_feat, tgt_c, tgt_ops, [src_feat], [src_c], [src_ops],
+                                 vertex_subset)
+        for key in ("z_GE", "z_LE", "dv"):
+            if out[key] is not None:
+                out[key] = out[key][0]
+        return out
+
+    def _require_skinning(self):
+        if not self.cfg.use_skinning:
+            raise ValueError("this NFSModel was built with use_skinning=False (no skinning encoder)")
