@@ -1,0 +1,224 @@
+"""The Python API: ``Retargeter`` (DESIGN.md section 5).
+
+    from retarget import Retargeter, load_mesh
+    r = Retargeter.load()                      # bundled default checkpoint, or a path
+    tgt = r.prepare(load_mesh("target.obj"))   # operators, image, identity + skinning codes
+    verts = r.transfer(load_mesh("src_frame.obj"), tgt)   # (V_tgt, 3) in target units
+    verts_seq = r.animate(tgt, weights)        # (T, 53) array or {name: value} dicts
+    w = r.invert(load_mesh("frame.obj"))       # (53,) FACS weights in ICT order
+
+Every mesh is canonicalised on the way in (centred, scaled to a 16-unit-wide head) and results are
+mapped back to the target's own frame and units. Targets above ``proxy_vertices`` are encoded on a
+vertex-clustered proxy and decoded per vertex at full resolution, in chunks.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from data_synth.facs import FACS_INDEX, N_FACS
+from nets.model import NFSModel, TargetCodes, weights_to_code
+
+from .decimate import cluster_decimate
+from .errors import RetargetError
+from .mesh import Mesh
+from .checkpoint import load_checkpoint, model_from_checkpoint
+from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh
+from .smoothing import smooth_codes
+
+DEFAULT_CHECKPOINT = "default.pt"
+
+
+def default_checkpoint_path() -> Path:
+    """The checkpoint bundled with the package (``retarget/checkpoints/default.pt``)."""
+    return Path(str(resources.files("retarget") / "checkpoints" / DEFAULT_CHECKPOINT))
+
+
+@dataclass
+class Target:
+    """A prepared target neutral mesh (``Retargeter.prepare``).
+
+    mesh: the user's mesh (its frame and units). proxy: the prepared (canonical) mesh the encoders
+    ran on — the mesh itself, or its decimated proxy for large meshes. feat: (V,6) float32 canonical
+    features of every vertex of ``mesh``. c: (128,) image code; codes: z_ID and skinning weights
+    (ω_Skin per vertex of ``mesh``).
+    """
+
+    mesh: Mesh
+    proxy: PreparedMesh
+    feat: torch.Tensor
+    c: torch.Tensor
+    codes: TargetCodes
+
+    @property
+    def n_vertices(self) -> int:
+        return self.mesh.n_vertices
+
+
+@dataclass
+class BakedRig:
+    """The 53 decoded shapes of a target: a linear rig for real-time playback.
+
+    neutral: (V,3) target vertices (+ the decoder's output at zero weights); deltas: (53,V,3), both
+    in the target's units. ``evaluate(w)`` = neutral + w·deltas for w (53,) or (T,53).
+    """
+
+    neutral: np.ndarray
+    deltas: np.ndarray
+
+    def evaluate(self, weights) -> np.ndarray:
+        return self.neutral + np.tensordot(np.asarray(weights, np.float32), self.deltas, axes=1)
+
+
+class Retargeter:
+    """Expression cloning, driving from FACS weights and inverse rigging with one NFS model."""
+
+    def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
+                 chunk: int = 16384, cache_dir=None):
+        self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        self.model = model.to(self.device).eval()
+        self.cfg = model.cfg
+        self.proxy_vertices = proxy_vertices
+        self.chunk = chunk
+        self.cache_dir = cache_dir
+
+    @classmethod
+    def load(cls, path=None, device=None, **kwargs) -> "Retargeter":
+        """Load a checkpoint (None = the bundled default). RetargetError for a missing, corrupt,
+        tampered (refused by ``weights_only``) or incompatible file."""
+        path = Path(path) if path is not None else default_checkpoint_path()
+        return cls(model_from_checkpoint(load_checkpoint(path), path), device, **kwargs)
+
+    # --------------------------------------------------------------------------- preparation
+    def _prepare(self, mesh: Mesh, canon=None, ops=None) -> PreparedMesh:
+        return prepare_mesh(mesh.vertices, mesh.faces, self.cfg.k_eig, self.cfg.image_size,
+                            IMAGE_CHANNELS[self.cfg.image_channels], canon=canon, ops=ops,
+                            cache_dir=self.cache_dir)
+
+    def _image_code(self, prepared: PreparedMesh) -> torch.Tensor:
+        return self.model.image_code(torch.from_numpy(prepared.image)[None].to(self.device))[0]
+
+    @torch.no_grad()
+    def prepare(self, mesh: Mesh) -> Target:
+        """Operators, frontal image, z_ID and skinning weights of a target neutral mesh."""
+        if isinstance(mesh, Target):
+            return mesh
+        full = self._prepare_features_only(mesh)
+        if mesh.n_vertices > self.proxy_vertices:
+            proxy_mesh, cluster = cluster_decimate(mesh.vertices, mesh.faces, self.proxy_vertices)
+            proxy = self._prepare(Mesh(proxy_mesh[0], proxy_mesh[1], mesh.name), canon=full[0])
+        else:
+            proxy, cluster = self._prepare(mesh, canon=full[0]), None
+        feat_p, _, ops_p = proxy.torch_inputs(self.device)
+        c = self._image_code(proxy)
+        codes = self.model.encode_target(feat_p, c, ops_p)
+        if cluster is not None and codes.omega_skin is not None:
+            idx = torch.from_numpy(cluster).to(self.device)
+            codes = TargetCodes(codes.z_id, codes.z_skin[idx], codes.omega_skin[idx])
+        feat = torch.from_numpy(full[1]).to(self.device)
+        return Target(mesh, proxy, feat, c, codes)
+
+    def _prepare_features_only(self, mesh: Mesh):
+        """(canonicaliser, (V,6) features) of a mesh without operators (cheap at any size)."""
+        from .canonical import Canonicaliser
+        from .prepare import vertex_features
+        canon = Canonicaliser.fit(mesh.vertices, name=mesh.name or "target")
+        cv = canon.to_canonical(mesh.vertices).astype(np.float32)
+        return canon, vertex_features(cv, mesh.faces)
+
+    # --------------------------------------------------------------------------- codes
+    @torch.no_grad()
+    def encode(self, frames, source_neutral: Mesh | None = None, progress: bool = False) -> np.ndarray:
+        """Global expression codes z_GE of source frame(s): a Mesh or a list of frames sharing a
+        topology -> (128,) or (T,128). The frames share one canonical frame and one set of operators,
+        those of ``source_neutral`` if given, else of the first frame. ``progress``: a tqdm bar."""
+        from tqdm import tqdm
+
+        single = isinstance(frames, Mesh)
+        frames = [frames] if single else list(frames)
+        if not frames:
+            raise RetargetError("no source frames given")
+        ref = source_neutral or frames[0]
+        if ref.n_vertices > self.proxy_vertices:
+            raise RetargetError(f"{ref.name or 'source'}: {ref.n_vertices:,} vertices; sources above "
+                                f"{self.proxy_vertices:,} vertices are not supported yet — decimate it")
+        base = self._prepare(ref)
+        codes = []
+        for f in tqdm(frames, desc="encoding", unit="frame", disable=not progress or len(frames) < 2):
+            if f.n_vertices != ref.n_vertices:
+                raise RetargetError(f"{f.name or 'frame'}: {f.n_vertices} vertices, but the source has "
+                                    f"{ref.n_vertices} ({ref.name or 'first frame'})")
+            p = self._prepare(f, canon=base.canon, ops=base.ops)
+            feat, img, ops = p.torch_inputs(self.device)
+            codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], ops))
+        out = torch.stack(codes).cpu().numpy()
+        return out[0] if single else out
+
+    def invert(self, frames, source_neutral: Mesh | None = None, smooth: str | None = None,
+               fps: float = 30.0, progress: bool = False) -> np.ndarray:
+        """Inverse rigging: frame(s) -> FACS weights (53,) or (T,53) in ICT order, clipped to [0,1].
+        ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames."""
+        z = self.encode(frames, source_neutral, progress)
+        if smooth and z.ndim == 2:
+            z = smooth_codes(z, smooth, fps)
+        return np.clip(z[..., :N_FACS], 0.0, 1.0).astype(np.float32)
+
+    # --------------------------------------------------------------------------- decoding
+    @torch.no_grad()
+    def decode(self, target, z_ge) -> np.ndarray:
+        """Target vertices for expression code(s) z_GE (128,) or (T,128) -> (V,3) or (T,V,3),
+        in the target's frame and units."""
+        target = self.prepare(target)
+        z = torch.as_tensor(np.asarray(z_ge, np.float32), device=self.device)
+        single = z.dim() == 1
+        out = []
+        for zi in z.reshape(-1, z.shape[-1]):
+            dv = self.model.decode_target(target.feat, target.c, target.codes, zi, chunk=self.chunk)
+            out.append(target.mesh.vertices
+                       + target.proxy.canon.displacement_from_canonical(dv.cpu().numpy()))
+        res = np.stack(out)
+        return res[0] if single else res
+
+    def transfer(self, source, target, source_neutral: Mesh | None = None,
+                 smooth: str | None = None, fps: float = 30.0, progress: bool = False) -> np.ndarray:
+        """Clone the expression of source frame(s) onto a target neutral mesh (any topology).
+        source: a Mesh or a list of frames -> (V_tgt,3) or (T,V_tgt,3) in the target's units."""
+        z = self.encode(source, source_neutral, progress)
+        if smooth and z.ndim == 2:
+            z = smooth_codes(z, smooth, fps)
+        return self.decode(target, z)
+
+    def animate(self, target, weights) -> np.ndarray:
+        """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list
+        of dicts {ICT name: value} -> (V,3) or (T,V,3). z_GE = [w, 0]."""
+        w = weights_array(weights)
+        return self.decode(target, weights_to_code(torch.from_numpy(w)).numpy())
+
+    def bake(self, target) -> BakedRig:
+        """Decode the 53 one-hot expressions once: a linear blendshape rig for the target."""
+        target = self.prepare(target)
+        shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
+        return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
+
+
+def weights_array(weights) -> np.ndarray:
+    """(53,) / (T,53) arrays, or {name: value} dict(s) with ICT names -> float32 array."""
+    if isinstance(weights, dict):
+        return weights_array([weights])[0]
+    if isinstance(weights, (list, tuple)) and weights and isinstance(weights[0], dict):
+        out = np.zeros((len(weights), N_FACS), np.float32)
+        for t, frame in enumerate(weights):
+            unknown = sorted(set(frame) - set(FACS_INDEX))
+            if unknown:
+                raise RetargetError(f"unknown FACS weight names: {', '.join(unknown)}")
+            for name, value in frame.items():
+                out[t, FACS_INDEX[name]] = value
+        return out
+    w = np.asarray(weights, np.float32)
+    if w.shape[-1] != N_FACS or w.ndim not in (1, 2):
+        raise RetargetError(f"weights must be (53,) or (T,53) in ICT order, got shape {w.shape}")
+    return w

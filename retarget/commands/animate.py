@@ -1,0 +1,34 @@
+"""``retarget animate``: drive a target mesh from FACS weights, without building a rig."""
+from __future__ import annotations
+
+from ._common import add_model_args, read_weights_file, retargeter, write_frames
+
+HELP = "drive the neutral TGT from FACS weights (ICT/ARKit CSV, Live Link Face CSV, JSON)"
+EXAMPLE = """retarget animate character_neutral.obj --weights take01_livelink.csv -o take01.glb
+retarget animate character_neutral.obj --weights smile.json -o smile.obj
+retarget animate scan.ply --weights weights.csv -o frames/ --baked --clamp"""
+
+
+def add_arguments(p):
+    p.add_argument("target", help="target neutral mesh (any topology)")
+    p.add_argument("--weights", required=True, help="weights: .csv (ICT/ARKit names or Live Link Face) or .json")
+    p.add_argument("-o", "--out", required=True, help="output .obj/.ply (one frame), .glb, or a folder")
+    p.add_argument("--clamp", action="store_true", help="clip weights to [0, 1] instead of warning")
+    p.add_argument("--baked", action="store_true",
+                   help="decode the 53 shapes once and blend them linearly (fast, approximate)")
+    p.add_argument("--format", choices=("obj", "ply"), default="obj", help="frame files in a folder")
+    add_model_args(p)
+
+
+def run(args) -> int:
+    from ..io import load_mesh
+
+    track = read_weights_file(args.weights, args.clamp)
+    target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
+    r = retargeter(args)
+    tgt = r.prepare(target)
+    verts = r.bake(tgt).evaluate(track.weights) if args.baked else r.animate(tgt, track.weights)
+    written = write_frames(args.out, verts, target.faces, [args.target, args.weights], args,
+                           fps=track.fps or 30.0)
+    print(f"wrote {len(verts)} frame(s) to {written[0] if len(written) == 1 else args.out}")
+    return 0

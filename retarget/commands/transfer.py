@@ -1,0 +1,38 @@
+"""``retarget transfer``: clone the expression(s) of a source mesh or sequence onto a target."""
+from __future__ import annotations
+
+from ._common import add_model_args, add_smooth_arg, retargeter, write_frames
+
+HELP = "clone expression(s) of SRC (a mesh, a folder or a glob of frames) onto the neutral TGT"
+EXAMPLE = """retarget transfer actor/frame_0001.obj character_neutral.obj -o smile.obj
+retarget transfer "capture/*.obj" character_neutral.obj -o out_frames/ --smooth savgol
+retarget transfer capture/ character_neutral.obj -o performance.glb --source-neutral actor_neutral.obj"""
+
+
+def add_arguments(p):
+    p.add_argument("source", help="source expression mesh, folder of frames, or glob (quote it)")
+    p.add_argument("target", help="target neutral mesh (any topology)")
+    p.add_argument("-o", "--out", required=True, help="output .obj/.ply (one frame), .glb, or a folder")
+    p.add_argument("--source-neutral", help="the source's neutral mesh (better canonical frame)")
+    p.add_argument("--format", choices=("obj", "ply"), default="obj", help="frame files in a folder")
+    add_smooth_arg(p)
+    add_model_args(p)
+
+
+def run(args) -> int:
+    from ..io import load_mesh, load_sequence, sequence_files
+
+    inputs = sequence_files(args.source) + [args.target]
+    frames = load_sequence(args.source, up=args.up, forward=args.forward)
+    target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
+    neutral = None
+    if args.source_neutral:
+        neutral = load_mesh(args.source_neutral, up=args.up, forward=args.forward)
+        inputs.append(args.source_neutral)
+    r = retargeter(args)
+    verts = r.transfer(frames, r.prepare(target), neutral, smooth=args.smooth, fps=args.fps,
+                       progress=True)
+    written = write_frames(args.out, verts, target.faces, inputs, args, fps=args.fps)
+    print(f"wrote {len(frames)} frame(s) on {target.n_vertices} target vertices to "
+          f"{written[0] if len(written) == 1 else args.out}")
+    return 0

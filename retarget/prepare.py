@@ -1,0 +1,74 @@
+"""Preparing a mesh for the network: canonical frame, vertex features, operators, frontal image.
+
+The same preparation serves training (targets and sources of procedural rigs) and the user API
+(``Retargeter.prepare``), so the network always sees meshes made the same way.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from nets.geometry import Operators, TorchOperators, load_or_compute_operators, vertex_normals
+
+from .canonical import Canonicaliser
+from .render import render_frontal
+
+
+#: Frontal-render channels by channel count (the CNN input; nets.model.NFSConfig.image_channels).
+IMAGE_CHANNELS = {1: ("shaded",), 2: ("shaded", "depth"), 4: ("normals", "depth")}
+
+
+@dataclass
+class PreparedMesh:
+    """A mesh ready for the encoders and the decoder.
+
+    canon: the canonicaliser fitted on the mesh (maps results back to the input's frame and units).
+    vertices: (V,3) float32 canonical positions. faces: (F,3) int64.
+    feat: (V,6) float32 per-vertex features v = [canonical position, unit vertex normal].
+    ops: the DiffusionNet operators of the (canonical) surface.
+    image: (C,H,W) float32 frontal render in [0,1] (the CNN input).
+    """
+
+    canon: Canonicaliser
+    vertices: np.ndarray
+    faces: np.ndarray
+    feat: np.ndarray
+    ops: Operators
+    image: np.ndarray
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    def torch_inputs(self, device) -> tuple[torch.Tensor, torch.Tensor, TorchOperators]:
+        """(feat (V,6), image (1,C,H,W), operators) as tensors on ``device``."""
+        feat = torch.from_numpy(self.feat).to(device)
+        image = torch.from_numpy(self.image).unsqueeze(0).to(device)
+        return feat, image, self.ops.to_torch(device)
+
+
+def vertex_features(canonical_vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """v = [position, unit normal] per vertex: (V,3) canonical positions -> (V,6) float32."""
+    normals = vertex_normals(np.asarray(canonical_vertices, np.float64), faces)
+    return np.concatenate([canonical_vertices, normals], axis=1).astype(np.float32)
+
+
+def prepare_mesh(vertices: np.ndarray, faces: np.ndarray, k_eig: int, image_size: int,
+                 image_channels: tuple[str, ...], canon: Canonicaliser | None = None,
+                 ops: Operators | None = None, cache_dir=None) -> PreparedMesh:
+    """Canonicalise a mesh and compute everything the network needs.
+
+    vertices (V,3) in any units/offset, faces (F,3). ``canon``: reuse a canonicaliser (e.g. the
+    neutral's, for its expression frames); default: fitted on these vertices. ``ops``: reuse operators
+    (an expression frame may reuse its neutral's, as the NFS authors do); default: computed on the
+    canonical mesh and cached on disk by content hash (``cache_dir``, see nets.geometry).
+    """
+    canon = canon or Canonicaliser.fit(vertices)
+    cv = canon.to_canonical(vertices).astype(np.float32)
+    faces = np.asarray(faces, np.int64)
+    if ops is None:
+        ops = load_or_compute_operators(cv, faces, k_eig, cache_dir=cache_dir)
+    image = render_frontal(cv, faces, image_size, channels=tuple(image_channels))
+    return PreparedMesh(canon, cv, faces, vertex_features(cv, faces), ops, image)

@@ -1,0 +1,354 @@
+"""The trainer: ``retarget train --config configs/train/NAME.yaml``.
+
+One step = one target neutral and S source expressions (``training_data.TargetPool.sample``): the
+target's identity and skinning codes are computed once and every source is decoded on a random
+subset of the target's faces. Losses are those of NFS eq. 2-9 (``nets.losses``), in canonical units.
+
+Checkpoints (``last.pt`` in the run folder) hold plain types and tensors only and load with
+``torch.load(weights_only=True)``; they are written atomically every ``ckpt_minutes`` and on Ctrl-C,
+so ``--resume`` continues exactly (same samples, same parameters) after any interruption, SIGKILL
+included, losing at most one interval. Several processes: ``torchrun --nproc_per_node N -m
+retarget.cli train ...``; gradients are averaged across processes with all-reduce (gloo on the CPU,
+nccl on CUDA), so every process keeps identical parameters.
+"""
+from __future__ import annotations
+
+import copy
+import csv
+import math
+import os
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.distributed as dist
+import yaml
+
+from nets import losses as L
+from nets.model import NFSConfig, NFSModel
+
+from .checkpoint import CHECKPOINT_FORMAT, load_checkpoint, model_from_checkpoint, save_checkpoint
+from .errors import RetargetError
+from .metrics import CM_TO_MM, segment_mse_mm2
+from .prepare import IMAGE_CHANNELS, vertex_features
+from .render import render_frontal
+from .training_data import Group, TargetPool, validation_entries
+
+DEFAULTS = {
+    "model": {"preset": "cpu"},
+    "data": {
+        "n_identities": 1000, "pool_size": 32, "pool_refresh": 25,
+        "tessellations": [{"n_vertices": 2500, "kind": "adaptive", "region": "full"}],
+        "pairs": {"self": 0.5, "cross_topology": 0.2, "cross_identity": 0.3},
+        "weights": "mixed", "sources_per_target": 4, "decode_faces": 1000,
+        "augment": {"rotate_deg": 3.0, "scale": 0.05, "translate": 0.5},
+        "val_identities": 4, "val_expressions": 4,
+    },
+    "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,
+             "bp": 1.0, "br": 1.0, "nll": 1.0},
+    "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
+    "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
+              "ckpt_minutes": 5.0},
+}
+
+
+# ------------------------------------------------------------------------------------- config
+def merge(defaults: dict, overrides: dict, where: str) -> dict:
+    """Recursively override ``defaults``; unknown keys raise RetargetError naming ``where``."""
+    out = copy.deepcopy(defaults)
+    for key, value in (overrides or {}).items():
+        if key not in defaults:
+            raise RetargetError(f"{where}: unknown key {key!r} (known: {', '.join(defaults)})")
+        if isinstance(defaults[key], dict) and key != "pairs" and not isinstance(value, dict):
+            raise RetargetError(f"{where}: {key!r} must be a mapping")
+        if isinstance(defaults[key], dict) and key not in ("model",):
+            out[key] = merge(defaults[key], value, f"{where}.{key}")
+        else:
+            out[key] = value
+    return out
+
+
+def load_config(path) -> dict:
+    """Read a training YAML and fill in defaults. RetargetError names the file and the bad key."""
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text()) or {}
+    except OSError as e:
+        raise RetargetError(f"{path}: cannot read training config ({e.strerror})") from None
+    except yaml.YAMLError as e:
+        raise RetargetError(f"{path}: not valid YAML ({e})") from None
+    if not isinstance(raw, dict):
+        raise RetargetError(f"{path}: a training config must be a mapping")
+    cfg = merge(DEFAULTS, raw, str(path))
+    model_cfg(cfg, str(path))  # validates the model section
+    return cfg
+
+
+def model_cfg(cfg: dict, where: str = "config") -> NFSConfig:
+    """The NFSConfig of a training config: ``model: {preset: NAME, <field>: value, ...}``."""
+    m = dict(cfg["model"])
+    try:
+        return NFSConfig.preset(m.pop("preset", "cpu"), **m)
+    except (ValueError, TypeError) as e:
+        raise RetargetError(f"{where}: model: {e}") from None
+
+
+# ------------------------------------------------------------------------------------- devices
+def pick_device() -> torch.device:
+    """CUDA when present (the local rank's GPU under torchrun), else the CPU."""
+    if torch.cuda.is_available():
+        return torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
+    return torch.device("cpu")
+
+
+def init_distributed(device: torch.device) -> tuple[int, int]:
+    """(rank, world size); joins the process group when launched by torchrun (WORLD_SIZE > 1)."""
+    world = int(os.environ.get("WORLD_SIZE", 1))
+    if world > 1 and not dist.is_initialized():
+        dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
+    return (dist.get_rank(), world) if world > 1 else (0, 1)
+
+
+def average_gradients(model: torch.nn.Module, world: int) -> None:
+    """All-reduce (mean) every gradient across processes in one flat buffer."""
+    if world == 1:
+        return
+    grads = [p.grad for p in model.parameters() if p.grad is not None]
+    flat = torch.cat([g.reshape(-1) for g in grads])
+    dist.all_reduce(flat)
+    flat /= world
+    offset = 0
+    for g in grads:
+        g.copy_(flat[offset:offset + g.numel()].view_as(g))
+        offset += g.numel()
+
+
+# ------------------------------------------------------------------------------------- losses
+def face_subset(faces: np.ndarray, n_faces: int, rng: np.random.Generator):
+    """Random faces of the target and the vertices they use.
+
+    Returns (rows (n,) int64 vertex indices, sub_faces (m,3) int64 re-indexed into rows).
+    """
+    if n_faces <= 0 or n_faces >= len(faces):
+        chosen = faces
+    else:
+        chosen = faces[rng.choice(len(faces), n_faces, replace=False)]
+    rows, inverse = np.unique(chosen, return_inverse=True)
+    return rows, inverse.reshape(-1, 3)
+
+
+def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
+                 rng: np.random.Generator, device) -> dict[str, torch.Tensor]:
+    """All NFS losses (eq. 2-9) of one training group; returns named scalars and ``total``."""
+    tgt = group.target
+    t_feat, t_img, t_ops = tgt.mesh.torch_inputs(device)
+    images = torch.from_numpy(np.stack([tgt.mesh.image] + [s.image for s in group.sources]))
+    codes_img = model.image_code(images.to(device))
+    c_t = codes_img[0]
+    codes = model.encode_target(t_feat, c_t, t_ops)
+    z_ge = torch.stack([
+        model.encode_expression(torch.from_numpy(s.feat).to(device), codes_img[i + 1],
+                                s.entry.mesh.ops.to_torch(device))
+        for i, s in enumerate(group.sources)])
+    weights = torch.from_numpy(np.stack([s.weights for s in group.sources])).to(device)
+
+    rows_np, sub_faces_np = face_subset(tgt.mesh.faces, n_faces, rng)
+    rows = torch.from_numpy(rows_np).to(device)
+    sub_faces = torch.from_numpy(sub_faces_np).to(device)
+    rest = t_feat[rows, :3]
+    dv = torch.stack([model.decode_target(t_feat, c_t, codes, g, rows) for g in z_ge])
+    gt = torch.from_numpy(group.gt_dv).to(device)[:, rows]
+    out = L.decoder_loss(rest + dv, rest + gt, rest, sub_faces, loss_cfg["lambda_v"],
+                         loss_cfg["lambda_n"], loss_cfg["lambda_g"])
+    identity_gt = torch.from_numpy(tgt.rig.identity.astype(np.float32)).to(device)
+    out["L_ID"] = L.identity_loss(codes.z_id, identity_gt)
+    out["L_Exp"] = L.expression_loss(z_ge, weights)
+    out["L_BP"] = torch.stack([
+        L.blendshape_projection_loss(g, w, torch.from_numpy(s.entry.basis).to(device))
+        for g, w, s in zip(z_ge, weights, group.sources)]).mean()
+    basis_t = torch.from_numpy(tgt.basis).to(device)
+    out["L_BR"] = L.blendshape_reconstruction_loss(model, t_feat, c_t, codes, z_ge, basis_t, rows)
+    total = (out["L_dec"] + loss_cfg["id"] * out["L_ID"] + loss_cfg["exp"] * out["L_Exp"]
+             + loss_cfg["bp"] * out["L_BP"] + loss_cfg["br"] * out["L_BR"])
+    if codes.z_skin is not None:
+        labels = torch.from_numpy(tgt.rig.segments).to(device)
+        out["L_nll"] = L.segmentation_nll(codes.z_skin, labels)
+        total = total + loss_cfg["nll"] * out["L_nll"]
+    out["total"] = total
+    return out
+
+
+@torch.no_grad()
+def validate(model: NFSModel, val_set, device) -> dict[str, float]:
+    """Self-retargeting on held-out identities: MSE and segment-averaged MSE in mm², weight MAE."""
+    model.eval()
+    mse, seg, mae = [], [], []
+    for entry, weights in val_set:
+        t_feat, t_img, t_ops = entry.mesh.torch_inputs(device)
+        c_t = model.image_code(t_img)[0]
+        codes = model.encode_target(t_feat, c_t, t_ops)
+        for w in weights:
+            frame = entry.mesh.canon.to_canonical(entry.rig.evaluate(w)).astype(np.float32)
+            feat = torch.from_numpy(vertex_features(frame, entry.mesh.faces)).to(device)
+            img = render_frontal(frame, entry.mesh.faces, model.cfg.image_size,
+                                 channels=IMAGE_CHANNELS[model.cfg.image_channels])
+            c_s = model.image_code(torch.from_numpy(img)[None].to(device))[0]
+            z_ge = model.encode_expression(feat, c_s, t_ops)
+            dv = model.decode_target(t_feat, c_t, codes, z_ge).cpu().numpy()
+            pred_cm = dv / entry.mesh.canon.scale
+            gt_cm = np.einsum("k,kvc->vc", w, entry.rig.deltas)
+            s, _ = segment_mse_mm2(pred_cm, gt_cm, entry.rig.segments, model.cfg.n_segments)
+            mse.append(float((((pred_cm - gt_cm) * CM_TO_MM) ** 2).sum(-1).mean()))
+            seg.append(s)
+            mae.append(float(np.abs(z_ge[:53].cpu().numpy() - w).mean()))
+    model.train()
+    return {"val_mse_mm2": float(np.mean(mse)), "val_seg_mse_mm2": float(np.mean(seg)),
+            "val_weight_mae": float(np.mean(mae))}
+
+
+def learning_rate(step: int, total: int, optim_cfg: dict) -> float:
+    """Linear warm-up then cosine decay to 5 % of the base rate."""
+    base, warm = optim_cfg["lr"], max(1, optim_cfg["warmup_steps"])
+    if step < warm:
+        return base * (step + 1) / warm
+    t = min(1.0, (step - warm) / max(1, total - warm))
+    return base * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * t)))
+
+
+LOG_COLUMNS = ("step", "elapsed_s", "lr", "samples_per_s", "total", "L_dec", "L_v", "L_n", "L_g",
+               "L_ID", "L_Exp", "L_BP", "L_BR", "L_nll", "val_mse_mm2", "val_seg_mse_mm2",
+               "val_weight_mae")
+
+
+class Trainer:
+    """Runs one training config into ``out_dir`` (``last.pt``, ``model.pt``, ``train_log.csv``)."""
+
+    def __init__(self, cfg: dict, out_dir, config_path: str = "", init=None, progress=True):
+        self.cfg, self.out = cfg, Path(out_dir)
+        self.device = pick_device()
+        self.rank, self.world = init_distributed(self.device)
+        self.model_cfg = model_cfg(cfg)
+        seed = cfg["train"]["seed"]
+        torch.manual_seed(seed)
+        self.model = NFSModel(self.model_cfg).to(self.device)
+        if init is not None:
+            self.model.load_state_dict(model_from_checkpoint(load_checkpoint(init), init).state_dict())
+        if self.world > 1:
+            for p in self.model.parameters():
+                dist.broadcast(p.data, 0)
+        self.opt = torch.optim.AdamW(self.model.parameters(), lr=cfg["optim"]["lr"],
+                                     weight_decay=cfg["optim"]["weight_decay"])
+        self.pool = TargetPool(cfg["data"], self.model_cfg, seed)
+        self.step, self.elapsed = 0, 0.0
+        self.config_path = config_path
+        self.progress = progress and self.rank == 0
+        self._stop = False
+
+    # ---- state
+    def state(self) -> dict:
+        return {"format": CHECKPOINT_FORMAT, "model_config": self.model_cfg.to_dict(),
+                "train_config": self.cfg, "model": self.model.state_dict(),
+                "optimizer": self.opt.state_dict(), "step": self.step, "elapsed_s": self.elapsed,
+                "torch_rng": torch.get_rng_state()}
+
+    def resume(self) -> bool:
+        """Continue from ``last.pt`` if present. Returns whether a checkpoint was loaded."""
+        path = self.out / "last.pt"
+        if not path.exists():
+            return False
+        state = load_checkpoint(path)
+        self.model.load_state_dict(model_from_checkpoint(state, path).state_dict())
+        self.opt.load_state_dict(state["optimizer"])
+        self.step, self.elapsed = int(state["step"]), float(state["elapsed_s"])
+        torch.set_rng_state(state["torch_rng"])
+        return True
+
+    def save(self) -> None:
+        if self.rank == 0:
+            save_checkpoint(self.out / "last.pt", self.state())
+
+    def export(self, path: Path) -> None:
+        """The inference checkpoint: config + model weights only (small)."""
+        if self.rank == 0:
+            save_checkpoint(path, {"format": CHECKPOINT_FORMAT,
+                                   "model_config": self.model_cfg.to_dict(),
+                                   "train_config": self.cfg, "model": self.model.state_dict(),
+                                   "step": self.step})
+
+    # ---- loop
+    def _log(self, row: dict) -> None:
+        if self.rank != 0:
+            return
+        path = self.out / "train_log.csv"
+        new = not path.exists()
+        with open(path, "a", newline="") as f:
+            w = csv.DictWriter(f, LOG_COLUMNS, extrasaction="ignore")
+            if new:
+                w.writeheader()
+            w.writerow(row)
+
+    def run(self, stop_at: int | None = None) -> dict:
+        """Train until ``steps`` or ``max_minutes`` (or, as if interrupted, ``stop_at``); save
+        ``last.pt`` and ``model.pt``; return the last validation metrics."""
+        tcfg, dcfg = self.cfg["train"], self.cfg["data"]
+        total_steps = tcfg["steps"]
+        self.out.mkdir(parents=True, exist_ok=True)
+        val_set = validation_entries(dcfg, self.model_cfg, tcfg["seed"]) if self.rank == 0 else []
+        previous = signal.signal(signal.SIGINT, self._request_stop)
+        metrics: dict = {}
+        last_ckpt = time.monotonic()
+        from tqdm import tqdm
+        bar = tqdm(total=total_steps, initial=self.step, disable=not self.progress,
+                   desc="train", dynamic_ncols=True)
+        running: dict[str, float] = {}
+        try:
+            while self.step < min(total_steps, stop_at or total_steps) and not self._stop:
+                if tcfg["max_minutes"] and self.elapsed >= 60 * tcfg["max_minutes"]:
+                    break
+                t0 = time.monotonic()
+                lr = learning_rate(self.step, total_steps, self.cfg["optim"])
+                for g in self.opt.param_groups:
+                    g["lr"] = lr
+                group = self.pool.sample(self.step, self.rank)
+                rng = np.random.default_rng([tcfg["seed"], self.step, self.rank, 1])
+                losses = group_losses(self.model, group, self.cfg["loss"], dcfg["decode_faces"],
+                                      rng, self.device)
+                self.opt.zero_grad(set_to_none=True)
+                losses["total"].backward()
+                average_gradients(self.model, self.world)
+                torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.cfg["optim"]["grad_clip"])
+                self.opt.step()
+                self.step += 1
+                dt = time.monotonic() - t0
+                self.elapsed += dt
+                for k, v in losses.items():
+                    running[k] = 0.9 * running.get(k, float(v)) + 0.1 * float(v)
+                bar.update(1)
+                bar.set_postfix(loss=f"{running['total']:.4f}", Lv=f"{running['L_v']:.4f}")
+                row = None
+                if self.step % tcfg["log_every"] == 0:
+                    row = {"step": self.step, "elapsed_s": round(self.elapsed, 1), "lr": f"{lr:.3g}",
+                           "samples_per_s": round(len(group.sources) * self.world / dt, 2),
+                           **{k: f"{v:.5g}" for k, v in running.items()}}
+                if self.rank == 0 and (self.step % tcfg["val_every"] == 0 or self.step == total_steps):
+                    metrics = validate(self.model, val_set, self.device)
+                    row = {**(row or {"step": self.step, "elapsed_s": round(self.elapsed, 1)}),
+                           **{k: f"{v:.4f}" for k, v in metrics.items()}}
+                    bar.write(f"step {self.step}: " + ", ".join(f"{k} {v:.4f}" for k, v in metrics.items()))
+                if row:
+                    self._log(row)
+                if time.monotonic() - last_ckpt > 60 * tcfg["ckpt_minutes"]:
+                    self.save()
+                    last_ckpt = time.monotonic()
+        finally:
+            bar.close()
+            signal.signal(signal.SIGINT, previous)
+        self.save()
+        self.export(self.out / "model.pt")
+        return metrics
+
+    def _request_stop(self, signum, frame):
+        """Ctrl-C: finish the current step, save, exit cleanly."""
+        self._stop = True

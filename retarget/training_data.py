@@ -1,0 +1,173 @@
+"""Training samples from procedural rigs: a deterministic pool of prepared identities.
+
+Preparing a target (rig, operators, frontal image) costs about a second on a CPU, a training step a
+fraction of that, so targets are kept in a *pool* of ``pool_size`` slots. Each slot holds one
+training identity tessellated two ways (so same-identity cross-topology pairs are free) and is
+replaced by a fresh identity every ``pool_size * pool_refresh`` steps, the slots staggered so that
+one slot changes every ``pool_refresh`` steps. Which identity and tessellations a slot holds at a
+step is a pure function of (seed, slot, step), and each step draws its sample with
+``numpy.random.default_rng([seed, step, rank])``: a resumed run sees exactly the samples it would
+have seen, without saving any sampler state.
+
+A sample (``Group``) is one target neutral and S sources with expressions, whose ground truth is the
+target's rig driven by the sources' weights — exact for self-, cross-identity and cross-topology
+pairs because every procedural tessellation samples the same (u, v) surface.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from data_synth.identity import sample_identity
+from data_synth.rig import Rig, build_rig
+from data_synth.sampling import sample_weights
+from data_synth.tessellate import tessellate
+
+from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh
+
+PAIR_KINDS = ("self", "cross_topology", "cross_identity")
+
+
+@dataclass
+class Entry:
+    """One identity on one tessellation, prepared for the network.
+
+    rig: the procedural rig (cm). mesh: its neutral prepared in the canonical frame.
+    basis: (53,V,3) float32 blendshape deltas in canonical units (rig.deltas · canon.scale).
+    """
+
+    rig: Rig
+    mesh: PreparedMesh
+    basis: np.ndarray
+
+
+@dataclass
+class Source:
+    """A source expression mesh: feat (V_s,6) and image (C,H,W) of the (augmented) frame in its own
+    canonical frame, the operators of its neutral, weights (53,) and its basis (53,V_s,3)."""
+
+    entry: Entry
+    feat: np.ndarray
+    image: np.ndarray
+    weights: np.ndarray
+    kind: str
+
+
+@dataclass
+class Group:
+    """One target neutral and S sources. gt_dv: (S,V,3) canonical target displacements w·B_tgt."""
+
+    target: Entry
+    sources: list[Source]
+    gt_dv: np.ndarray
+
+
+def prepare_entry(identity: np.ndarray, tess_spec: dict, tess_seed: int, model_cfg,
+                  n_segments: int) -> Entry:
+    """Build the rig of ``identity`` on a tessellation and prepare its neutral for the network."""
+    tess = tessellate(seed=tess_seed, **tess_spec)
+    rig = build_rig(identity, tess, n_segments=n_segments)
+    mesh = prepare_mesh(rig.neutral, rig.faces, model_cfg.k_eig, model_cfg.image_size,
+                        IMAGE_CHANNELS[model_cfg.image_channels])
+    return Entry(rig, mesh, (rig.deltas * mesh.canon.scale).astype(np.float32))
+
+
+def random_rotation(rng: np.random.Generator, max_deg: float) -> np.ndarray:
+    """A rotation (3,3) about a random axis by an angle uniform in [-max_deg, max_deg] degrees."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    a = np.deg2rad(rng.uniform(-max_deg, max_deg))
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * (k @ k)
+
+
+class TargetPool:
+    """The deterministic pool of prepared training identities (see the module docstring).
+
+    data_cfg: the ``data`` section of a training config; model_cfg: nets.model.NFSConfig.
+    """
+
+    def __init__(self, data_cfg: dict, model_cfg, seed: int, split: str = "train"):
+        self.cfg = data_cfg
+        self.model_cfg = model_cfg
+        self.seed = int(seed)
+        self.split = split
+        self.tess_specs = list(data_cfg["tessellations"])
+        self._slots: dict[int, tuple[tuple, tuple[Entry, Entry]]] = {}
+
+    def slot_key(self, slot: int, step: int) -> tuple[int, int, int]:
+        """(identity index, tessellation a, tessellation b) held by ``slot`` at ``step``."""
+        size, refresh = self.cfg["pool_size"], self.cfg["pool_refresh"]
+        generation = (step + slot * refresh) // (size * refresh)
+        identity = (slot + size * generation) % self.cfg["n_identities"]
+        rng = np.random.default_rng([self.seed, identity, generation, 7])
+        a, b = rng.choice(len(self.tess_specs), size=2, replace=len(self.tess_specs) < 2)
+        return int(identity), int(a), int(b)
+
+    def slot(self, slot: int, step: int) -> tuple[Entry, Entry]:
+        """The two prepared tessellations of the identity in ``slot`` at ``step`` (cached)."""
+        key = self.slot_key(slot, step)
+        cached = self._slots.get(slot)
+        if cached is None or cached[0] != key:
+            identity_index, a, b = key
+            identity = sample_identity(self.seed * 1_000_003 + identity_index, split=self.split)
+            entries = tuple(
+                prepare_entry(identity, self.tess_specs[t], tess_seed=identity_index * 2 + i,
+                              model_cfg=self.model_cfg, n_segments=self.model_cfg.n_segments)
+                for i, t in enumerate((a, b)))
+            self._slots[slot] = (key, entries)
+        return self._slots[slot][1]
+
+    def sample(self, step: int, rank: int = 0) -> Group:
+        """The training group of ``step`` on process ``rank``: a target and S sources."""
+        rng = np.random.default_rng([self.seed, step, rank])
+        size = self.cfg["pool_size"]
+        t_slot = int(rng.integers(size))
+        pair = self.slot(t_slot, step)
+        target = pair[int(rng.integers(2))]
+        n_src = self.cfg["sources_per_target"]
+        weights = sample_weights(rng, n_src, mode=self.cfg["weights"]).astype(np.float32)
+        probs = np.array([self.cfg["pairs"][k] for k in PAIR_KINDS], np.float64)
+        sources = []
+        for w in weights:
+            kind = PAIR_KINDS[int(rng.choice(3, p=probs / probs.sum()))]
+            if kind == "self":
+                entry = target
+            elif kind == "cross_topology":
+                entry = pair[1] if target is pair[0] else pair[0]
+            else:
+                other = (t_slot + 1 + int(rng.integers(size - 1))) % size if size > 1 else t_slot
+                entry = self.slot(other, step)[int(rng.integers(2))]
+            sources.append(self.make_source(entry, w, kind, rng))
+        gt = np.einsum("sk,kvc->svc", weights, target.basis).astype(np.float32)
+        return Group(target, sources, gt)
+
+    def make_source(self, entry: Entry, weights: np.ndarray, kind: str,
+                    rng: np.random.Generator) -> Source:
+        """The rig of ``entry`` driven by ``weights``, augmented by a small rotation, scale and
+        translation, then canonicalised on its own (as at inference, where no neutral is given)."""
+        aug = self.cfg.get("augment", {})
+        frame = entry.rig.evaluate(weights).astype(np.float64)
+        rot = random_rotation(rng, aug.get("rotate_deg", 0.0))
+        scale = np.exp(rng.uniform(-1, 1) * aug.get("scale", 0.0))
+        shift = rng.normal(size=3) * aug.get("translate", 0.0)
+        frame = (frame @ rot.T) * scale + shift
+        prepared = prepare_mesh(frame, entry.rig.faces, self.model_cfg.k_eig,
+                                self.model_cfg.image_size,
+                                IMAGE_CHANNELS[self.model_cfg.image_channels],
+                                ops=entry.mesh.ops)
+        return Source(entry, prepared.feat, prepared.image, weights, kind)
+
+
+def validation_entries(data_cfg: dict, model_cfg, seed: int) -> list[tuple[Entry, np.ndarray]]:
+    """Fixed validation set: ``val_identities`` held-out identities (split "val") on the first
+    tessellation, each with ``val_expressions`` fixed weight vectors (53,)."""
+    out = []
+    for i in range(data_cfg["val_identities"]):
+        entry = prepare_entry(sample_identity(seed * 1_000_003 + i, split="val"),
+                              data_cfg["tessellations"][0], tess_seed=10_000 + i,
+                              model_cfg=model_cfg, n_segments=model_cfg.n_segments)
+        rng = np.random.default_rng([seed, 99, i])
+        out.append((entry, sample_weights(rng, data_cfg["val_expressions"], mode="mixed")))
+    return out
