@@ -1,6 +1,7 @@
 """Options and file handling shared by the mesh commands (transfer, animate, invert, export-rig)."""
 from __future__ import annotations
 
+import sys
 import warnings
 from pathlib import Path
 
@@ -76,5 +77,5 @@ def read_weights_file(path, clamp: bool):
         warnings.simplefilter("always", WeightRangeWarning)
         track = read_weights(path, clamp=clamp)
     for w in caught:
-        print(f"warning: {w.message}")
+        print(f"warning: {w.message}", file=sys.stderr)
     return track

@@ -1,0 +1,108 @@
+"""The triangle mesh object of the pipeline and its validation.
+
+A :class:`Mesh` is a pair of arrays in the project frame (centimetres or the user's own units, +y up,
++z forward, +x = the character's left) plus a name (usually the file it came from). Treat the arrays
+as immutable: derived quantities (vertex normals) are computed lazily and cached, trimesh style; use
+:meth:`Mesh.copy` or build a new Mesh to change geometry.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .errors import RetargetError
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals.
+
+    vertices (V,3) float, faces (F,3) int (counter-clockwise seen from outside) -> (V,3) float64.
+    Each face contributes its unnormalised normal (length = twice its area) to its three corners;
+    vertices touched by no face (or only by degenerate faces) get a zero normal.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # (F,3), |n| = 2·area
+    out = np.zeros_like(v)
+    for k in range(3):
+        out[:, k] = np.bincount(f.ravel(), weights=np.repeat(face_n[:, k], 3), minlength=len(v))
+    norm = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Triangle areas: vertices (V,3), faces (F,3) -> (F,) float64 in squared input units."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+
+
+@dataclass(eq=False)
+class Mesh:
+    """A triangle mesh.
+
+    vertices: (V,3) float64, in the input's units (the pipeline maps results back to them).
+    faces: (F,3) int64 vertex indices, counter-clockwise seen from outside.
+    name: where it came from (a file path) — used in error messages.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    name: str = ""
+
+    def __post_init__(self):
+        self.vertices = np.ascontiguousarray(self.vertices, dtype=np.float64)
+        self.faces = np.ascontiguousarray(self.faces, dtype=np.int64)
+        if self.faces.size == 0:
+            self.faces = self.faces.reshape(0, 3)
+        if self.vertices.size == 0:
+            self.vertices = self.vertices.reshape(0, 3)
+        if self.vertices.ndim != 2 or self.vertices.shape[1] != 3:
+            raise RetargetError(f"{self.name or 'mesh'}: vertices must be (V,3), got {self.vertices.shape}")
+        if self.faces.ndim != 2 or self.faces.shape[1] != 3:
+            raise RetargetError(f"{self.name or 'mesh'}: faces must be (F,3) triangles, got {self.faces.shape}")
+
+    @property
+    def n_vertices(self) -> int:
+        """V, the number of vertices."""
+        return len(self.vertices)
+
+    @cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """(V,3) float64 area-weighted unit vertex normals (computed once, cached)."""
+        return vertex_normals(self.vertices, self.faces)
+
+    def copy(self) -> "Mesh":
+        """A deep copy (fresh arrays, no cached normals)."""
+        return Mesh(self.vertices.copy(), self.faces.copy(), self.name)
+
+
+def check_mesh(mesh: Mesh, path=None) -> Mesh:
+    """Validate a mesh for the pipeline; return it unchanged or raise RetargetError.
+
+    Refused, each with one line naming ``path`` (default ``mesh.name``): no vertices, non-finite
+    coordinates, no faces (a point cloud), face indices out of range, every face degenerate
+    (zero area relative to the mesh size). Individual degenerate faces are allowed.
+    """
+    where = str(path if path is not None else (mesh.name or "mesh"))
+    v, f = mesh.vertices, mesh.faces
+    if len(v) == 0:
+        raise RetargetError(f"{where}: the mesh is empty (no vertices)")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        raise RetargetError(
+            f"{where}: {int(bad.sum())} vertices have NaN/inf coordinates (first: vertex {int(np.argmax(bad))})"
+        )
+    if len(f) == 0:
+        raise RetargetError(f"{where}: is a point cloud (no faces); a triangle mesh is needed")
+    if f.min() < 0 or f.max() >= len(v):
+        raise RetargetError(
+            f"{where}: face index out of range (indices {int(f.min())}..{int(f.max())}, "
+            f"but only {len(v)} vertices)"
+        )
+    diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    if not (face_areas(v, f) > 1e-12 * diag * diag).any():
+        raise RetargetError(f"{where}: all {len(f)} faces are degenerate (zero area)")
+    return mesh
