@@ -111,7 +111,8 @@ class NFSConfig:
           renders, k = 64, 0.62 M parameters), sized for training on a 2-core CPU in about two
           hours: one thread, one target with 8 sources and 1000 decoded vertices, forward +
           backward + AdamW step took 73 ms per sample at 2.5k target vertices and 237 ms at 10k.
-        - ``"tiny"``: for tests (widths 16, 1 block, 32² renders, k = 16).
+        - ``"tiny"``: for tests (encoder widths 16, 1 block, decoder width 32 — narrower does not
+          fit even one training group —, 32² renders, k = 16).
         """
         if name not in _PRESETS:
             raise ValueError(f"unknown NFSConfig preset {name!r}; choose one of {sorted(_PRESETS)}")
@@ -136,7 +137,7 @@ _PRESETS: dict[str, dict[str, Any]] = {
                   skin_hidden=256, decoder_width=256, norm_groups=32),
     "cpu": {},
     "tiny": dict(image_size=32, cnn_width=8, enc_width=16, enc_blocks=1, k_eig=16,
-                 skin_hidden=16, decoder_width=16, norm_groups=4),
+                 skin_hidden=16, decoder_width=32, norm_groups=4),
 }
 
 

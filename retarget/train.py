@@ -324,7 +324,8 @@ class Trainer:
                 dt = time.monotonic() - t0
                 self.elapsed += dt
                 for k, v in losses.items():
-                    running[k] = 0.9 * running.get(k, float(v)) + 0.1 * float(v)
+                    v = float(v.detach())
+                    running[k] = 0.9 * running.get(k, v) + 0.1 * v
                 bar.update(1)
                 bar.set_postfix(loss=f"{running['total']:.4f}", Lv=f"{running['L_v']:.4f}")
                 row = None

@@ -83,7 +83,7 @@ def test_overfitting_one_group_lowers_the_vertex_loss(tmp_path):
     group = trainer.pool.sample(0)
     opt = torch.optim.Adam(trainer.model.parameters(), lr=3e-3)
     first = None
-    for _ in range(25):
+    for _ in range(30):
         losses = group_losses(trainer.model, group, cfg["loss"], 0, np.random.default_rng(0), "cpu")
         opt.zero_grad()
         losses["total"].backward()

@@ -1,0 +1,48 @@
+"""A procedural blendshape rig: one identity's neutral head and its 53 FACS deltas on one
+tessellation (ARCHITECTURE.md, `data_synth.rig`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .expressions import expression_deltas
+from .facs import N_FACS
+from .head import surface
+from .segmentation import SEGMENT_NAMES, segment_labels
+from .tessellate import Tessellation
+
+
+@dataclass
+class Rig:
+    """neutral (V,3) float32 cm; deltas (53,V,3) float32 cm (ICT order); faces (F,3) int64;
+    uv (V,2) float64; segments (V,) int64 in [0, L); identity (J,) float64; segment_names (L,)."""
+
+    neutral: np.ndarray
+    deltas: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray
+    segments: np.ndarray
+    identity: np.ndarray
+    segment_names: tuple
+
+    def evaluate(self, weights) -> np.ndarray:
+        """neutral + weights . deltas: weights (53,) -> (V,3) or (T,53) -> (T,V,3), float32 cm."""
+        w = np.asarray(weights, dtype=np.float32)
+        if w.shape[-1] != N_FACS or w.ndim not in (1, 2):
+            raise ValueError(f"weights must have shape (53,) or (T, 53), got {w.shape}")
+        return self.neutral + np.tensordot(w, self.deltas, axes=(-1, 0))
+
+
+def build_rig(identity, tess: Tessellation, n_segments: int = 20) -> Rig:
+    """Evaluate the head and the 53 expression operators of identity z_ID (J,) on `tess`."""
+    identity = np.asarray(identity, dtype=np.float64)
+    return Rig(
+        neutral=surface(tess.uv, identity).astype(np.float32),
+        deltas=expression_deltas(tess.uv, identity).astype(np.float32),
+        faces=np.asarray(tess.faces, dtype=np.int64),
+        uv=np.asarray(tess.uv, dtype=np.float64),
+        segments=segment_labels(tess.uv, n_segments),
+        identity=identity,
+        segment_names=SEGMENT_NAMES[n_segments],
+    )
