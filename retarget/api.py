@@ -8,8 +8,14 @@
     w = r.invert(load_mesh("frame.obj"))       # (53,) FACS weights in ICT order
 
 Every mesh is canonicalised on the way in (centred, scaled to a 16-unit-wide head) and results are
-mapped back to the target's own frame and units. Targets above ``proxy_vertices`` are encoded on a
-vertex-clustered proxy and decoded per vertex at full resolution, in chunks.
+mapped back to the target's own frame and units. Meshes above ``proxy_vertices`` (targets and source
+frames) are encoded on a vertex-clustered proxy; targets are decoded per vertex at full resolution,
+in chunks of ``chunk`` vertices.
+
+Every target and source is checked to be plausibly a head or face (:func:`check_head_like`), since
+the units are the user's own only proportions can be judged: at least ``MIN_VERTICES`` vertices, and
+no bounding-box side shorter than ``MIN_ASPECT`` times the longest (a plane, a stick or a strip is
+refused; the procedural face-only crop measures 0.66, the full head with neck 0.53).
 """
 from __future__ import annotations
 
@@ -23,7 +29,7 @@ import torch
 from data_synth.facs import FACS_INDEX, N_FACS
 from nets.model import NFSModel, TargetCodes, weights_to_code
 
-from .decimate import cluster_decimate
+from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
 from .mesh import Mesh
 from .checkpoint import load_checkpoint, model_from_checkpoint
@@ -31,6 +37,23 @@ from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh
 from .smoothing import smooth_codes
 
 DEFAULT_CHECKPOINT = "default.pt"
+MIN_VERTICES = 50   # fewer cannot describe a face
+MIN_ASPECT = 0.1    # shortest / longest bounding-box side of a plausible head or face
+
+
+def check_head_like(mesh: Mesh, role: str = "mesh") -> None:
+    """RetargetError naming the mesh if it cannot be a face: fewer than MIN_VERTICES vertices, or a
+    bounding box whose shortest side is below MIN_ASPECT times its longest (scale-free, so metres,
+    centimetres and millimetres are all accepted). ``role``: "target" or "source", for the message."""
+    name = mesh.name or role
+    if mesh.n_vertices < MIN_VERTICES:
+        raise RetargetError(f"{name}: only {mesh.n_vertices} vertices; a {role} face mesh needs at "
+                            f"least {MIN_VERTICES}")
+    ext = mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)
+    if ext.min() < MIN_ASPECT * ext.max():
+        raise RetargetError(
+            f"{name}: not a face-sized object (bounding box {ext[0]:.3g} x {ext[1]:.3g} x {ext[2]:.3g}: "
+            f"one side is under {MIN_ASPECT:g} of another); is it a head, with --up/--forward right?")
 
 
 def default_checkpoint_path() -> Path:
@@ -90,7 +113,12 @@ class Retargeter:
     def load(cls, path=None, device=None, **kwargs) -> "Retargeter":
         """Load a checkpoint (None = the bundled default). RetargetError for a missing, corrupt,
         tampered (refused by ``weights_only``) or incompatible file."""
-        path = Path(path) if path is not None else default_checkpoint_path()
+        if path is None:
+            path = default_checkpoint_path()
+            if not path.is_file():
+                raise RetargetError(f"no bundled checkpoint at {path}; train one with `retarget "
+                                    "train` or pass --checkpoint")
+        path = Path(path)
         return cls(model_from_checkpoint(load_checkpoint(path), path), device, **kwargs)
 
     # --------------------------------------------------------------------------- preparation
@@ -107,6 +135,7 @@ class Retargeter:
         """Operators, frontal image, z_ID and skinning weights of a target neutral mesh."""
         if isinstance(mesh, Target):
             return mesh
+        check_head_like(mesh, "target")
         full = self._prepare_features_only(mesh)
         if mesh.n_vertices > self.proxy_vertices:
             proxy_mesh, cluster = cluster_decimate(mesh.vertices, mesh.faces, self.proxy_vertices)
@@ -135,7 +164,9 @@ class Retargeter:
     def encode(self, frames, source_neutral: Mesh | None = None, progress: bool = False) -> np.ndarray:
         """Global expression codes z_GE of source frame(s): a Mesh or a list of frames sharing a
         topology -> (128,) or (T,128). The frames share one canonical frame and one set of operators,
-        those of ``source_neutral`` if given, else of the first frame. ``progress``: a tqdm bar."""
+        those of ``source_neutral`` if given, else of the first frame. Sources above
+        ``proxy_vertices`` are encoded on the vertex-clustered proxy of that reference (each frame's
+        proxy vertex = the mean of its cluster). ``progress``: a tqdm bar."""
         from tqdm import tqdm
 
         single = isinstance(frames, Mesh)
@@ -143,16 +174,21 @@ class Retargeter:
         if not frames:
             raise RetargetError("no source frames given")
         ref = source_neutral or frames[0]
+        check_head_like(ref, "source")
+        faces, cluster = ref.faces, None
         if ref.n_vertices > self.proxy_vertices:
-            raise RetargetError(f"{ref.name or 'source'}: {ref.n_vertices:,} vertices; sources above "
-                                f"{self.proxy_vertices:,} vertices are not supported yet — decimate it")
-        base = self._prepare(ref)
+            (_, faces), cluster = cluster_decimate(ref.vertices, ref.faces, self.proxy_vertices)
+
+        def proxy(mesh: Mesh) -> Mesh:
+            return mesh if cluster is None else Mesh(cluster_means(mesh.vertices, cluster), faces, mesh.name)
+
+        base = self._prepare(proxy(ref))
         codes = []
         for f in tqdm(frames, desc="encoding", unit="frame", disable=not progress or len(frames) < 2):
             if f.n_vertices != ref.n_vertices:
                 raise RetargetError(f"{f.name or 'frame'}: {f.n_vertices} vertices, but the source has "
                                     f"{ref.n_vertices} ({ref.name or 'first frame'})")
-            p = self._prepare(f, canon=base.canon, ops=base.ops)
+            p = self._prepare(proxy(f), canon=base.canon, ops=base.ops)
             feat, img, ops = p.torch_inputs(self.device)
             codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], ops))
         out = torch.stack(codes).cpu().numpy()
@@ -169,14 +205,17 @@ class Retargeter:
 
     # --------------------------------------------------------------------------- decoding
     @torch.no_grad()
-    def decode(self, target, z_ge) -> np.ndarray:
-        """Target vertices for expression code(s) z_GE (128,) or (T,128) -> (V,3) or (T,V,3),
-        in the target's frame and units."""
+    def decode(self, target, z_ge, progress: bool = False) -> np.ndarray:
+        """Target vertices for expression code(s) z_GE (128,) or (T,128) -> (V,3) or (T,V,3) float64,
+        in the target's frame and units. ``progress``: a tqdm bar over frames."""
+        from tqdm import tqdm
+
         target = self.prepare(target)
         z = torch.as_tensor(np.asarray(z_ge, np.float32), device=self.device)
         single = z.dim() == 1
+        z = z.reshape(-1, z.shape[-1])
         out = []
-        for zi in z.reshape(-1, z.shape[-1]):
+        for zi in tqdm(z, desc="decoding", unit="frame", disable=not progress or len(z) < 2):
             dv = self.model.decode_target(target.feat, target.c, target.codes, zi, chunk=self.chunk)
             out.append(target.mesh.vertices
                        + target.proxy.canon.displacement_from_canonical(dv.cpu().numpy()))
@@ -190,13 +229,13 @@ class Retargeter:
         z = self.encode(source, source_neutral, progress)
         if smooth and z.ndim == 2:
             z = smooth_codes(z, smooth, fps)
-        return self.decode(target, z)
+        return self.decode(target, z, progress)
 
-    def animate(self, target, weights) -> np.ndarray:
+    def animate(self, target, weights, progress: bool = False) -> np.ndarray:
         """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list
         of dicts {ICT name: value} -> (V,3) or (T,V,3). z_GE = [w, 0]."""
         w = weights_array(weights)
-        return self.decode(target, weights_to_code(torch.from_numpy(w)).numpy())
+        return self.decode(target, weights_to_code(torch.from_numpy(w)).numpy(), progress)
 
     def bake(self, target) -> BakedRig:
         """Decode the 53 one-hot expressions once: a linear blendshape rig for the target."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 
 from .errors import RetargetError
@@ -55,9 +56,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+AXIS_OPTIONS = ("--up", "--forward")
+_AXIS_VALUE = re.compile(r"^[+-][xyz]$", re.IGNORECASE)
+
+
+def join_axis_values(argv: list[str]) -> list[str]:
+    """``--forward -y`` -> ``--forward=-y``: argparse would take ``-y`` for an option."""
+    out = []
+    for arg in argv:
+        if out and out[-1] in AXIS_OPTIONS and _AXIS_VALUE.match(arg):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_axis_values(sys.argv[1:] if argv is None else list(argv)))
     if not getattr(args, "_run", None):
         parser.print_help()
         return 1
@@ -65,6 +81,10 @@ def main(argv: list[str] | None = None) -> int:
         return int(args._run(args) or 0)
     except RetargetError as e:
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"error: out of memory running {args.command}; try a smaller mesh or fewer frames",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -393,8 +393,10 @@ def sequence_files(spec) -> list[Path]:
     return sorted(files, key=_natural_key)
 
 
-def load_sequence(spec, up: str | None = None, forward: str | None = None) -> list[Mesh]:
+def load_sequence(spec, up: str | None = None, forward: str | None = None,
+                  force: bool = False) -> list[Mesh]:
     """Read the frames of a sequence (folder, glob or single file; see :func:`sequence_files`).
+    ``force``: read frames above the vertex limit anyway (see :func:`load_mesh`).
 
     All frames must share the first frame's vertex count and face array (RetargetError naming the
     first offending file). Shows a progress bar for long sequences on a terminal.
@@ -404,7 +406,7 @@ def load_sequence(spec, up: str | None = None, forward: str | None = None) -> li
     files = sequence_files(spec)
     frames = []
     for f in tqdm(files, desc="reading frames", unit="frame", disable=True if len(files) < 20 else None):
-        mesh = load_mesh(f, up=up, forward=forward)
+        mesh = load_mesh(f, up=up, forward=forward, force=force)
         if frames:
             first = frames[0]
             if mesh.n_vertices != first.n_vertices:

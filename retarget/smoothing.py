@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import savgol_filter
 
+from .errors import RetargetError
+
 FILTERS = ("one_euro", "savgol")
 
 
@@ -45,9 +47,10 @@ def savgol(x: np.ndarray, window: int = 9, order: int = 2) -> np.ndarray:
 
 
 def smooth_codes(z: np.ndarray, method: str, fps: float = 30.0) -> np.ndarray:
-    """Filter codes (T, D) over time with ``method`` in FILTERS."""
+    """Filter codes (T, D) over time with ``method`` in FILTERS -> (T, D) float64; RetargetError for
+    another method."""
     if method == "one_euro":
         return one_euro(z, fps)
     if method == "savgol":
         return savgol(z)
-    raise ValueError(f"unknown smoothing {method!r}; choose one of {', '.join(FILTERS)}")
+    raise RetargetError(f"unknown smoothing {method!r}; choose one of {', '.join(FILTERS)}")

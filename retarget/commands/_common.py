@@ -9,6 +9,7 @@ import numpy as np
 
 from ..errors import RetargetError
 from ..io import READ_FORMATS, WRITE_FORMATS, axis_rotation, check_output, save_mesh
+from ..smoothing import FILTERS
 
 
 def add_model_args(p) -> None:
@@ -20,7 +21,7 @@ def add_model_args(p) -> None:
 
 
 def add_smooth_arg(p) -> None:
-    p.add_argument("--smooth", choices=("one_euro", "savgol"),
+    p.add_argument("--smooth", choices=FILTERS,
                    help="temporal filter of the codes of a sequence (streaming / offline)")
     p.add_argument("--fps", type=float, default=30.0, help="frame rate of the sequence (default 30)")
 
@@ -36,35 +37,41 @@ def rotation(args) -> np.ndarray:
     return axis_rotation(args.up, args.forward)
 
 
-def write_frames(out: str, frames: np.ndarray, faces: np.ndarray, inputs: list, args,
-                 fps: float = 30.0) -> list[Path]:
-    """Write (T,V,3) project-frame vertices in the input files' axes.
+def output_paths(out: str, n_frames: int, inputs: list, fmt: str = "obj") -> list[Path]:
+    """The files that OUT will receive for ``n_frames`` frames, checked before any work is done.
 
     OUT = a .obj/.ply file (one frame), a .glb (the frames as an animation) or a folder
-    (frame_0000.obj, ...; ``--format``). Never overwrites an input; each file is written atomically.
+    (frame_0000.<fmt>, ...). RetargetError for an output that is an input, several frames into one
+    mesh file, an unwritable extension, or a file where a folder is meant.
     """
-    frames = np.asarray(frames) @ rotation(args)  # back to the files' axes (R orthonormal)
     out_path = Path(out)
     ext = out_path.suffix.lower()
-    if ext == ".glb":
-        from ..glb import write_sequence_glb
-        check_output(out_path, inputs)
-        write_sequence_glb(out_path, frames, faces, fps=fps)
-        return [out_path]
-    if ext in WRITE_FORMATS:
-        if len(frames) != 1:
-            raise RetargetError(f"{out}: {len(frames)} frames cannot go into one {ext} file; give a "
+    if ext == ".glb" or ext in WRITE_FORMATS:
+        if ext != ".glb" and n_frames != 1:
+            raise RetargetError(f"{out}: {n_frames} frames cannot go into one {ext} file; give a "
                                 f"folder or a .glb")
-        check_output(out_path, inputs)
-        save_mesh(out_path, frames[0], faces)
-        return [out_path]
-    if ext in READ_FORMATS or ext in (".csv", ".json"):
+        paths = [out_path]
+    elif ext in READ_FORMATS or ext in (".csv", ".json"):
         raise RetargetError(f"{out}: cannot write {ext}; use .obj, .ply, .glb or a folder")
-    if out_path.exists() and not out_path.is_dir():
+    elif out_path.exists() and not out_path.is_dir():
         raise RetargetError(f"{out}: exists and is not a folder")
-    paths = [out_path / f"frame_{t:04d}.{getattr(args, 'format', 'obj')}" for t in range(len(frames))]
+    else:
+        paths = [out_path / f"frame_{t:04d}.{fmt}" for t in range(n_frames)]
     for p in paths:
         check_output(p, inputs)
+    return paths
+
+
+def write_frames(out: str, frames: np.ndarray, faces: np.ndarray, inputs: list, args,
+                 fps: float = 30.0) -> list[Path]:
+    """Write (T,V,3) project-frame vertices in the input files' axes to OUT (see
+    :func:`output_paths`). Never overwrites an input; each file is written atomically."""
+    frames = np.asarray(frames) @ rotation(args)  # back to the files' axes (R orthonormal)
+    paths = output_paths(out, len(frames), inputs, getattr(args, "format", "obj"))
+    if paths[0].suffix.lower() == ".glb":
+        from ..glb import write_sequence_glb
+        write_sequence_glb(paths[0], frames, faces, fps=fps)
+        return paths
     for p, f in zip(paths, frames):
         save_mesh(p, f, faces)
     return paths

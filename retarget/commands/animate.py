@@ -1,7 +1,7 @@
 """``retarget animate``: drive a target mesh from FACS weights, without building a rig."""
 from __future__ import annotations
 
-from ._common import add_model_args, read_weights_file, retargeter, write_frames
+from ._common import add_model_args, output_paths, read_weights_file, retargeter, write_frames
 
 HELP = "drive the neutral TGT from FACS weights (ICT/ARKit CSV, Live Link Face CSV, JSON)"
 EXAMPLE = """retarget animate character_neutral.obj --weights take01_livelink.csv -o take01.glb
@@ -23,12 +23,14 @@ def add_arguments(p):
 def run(args) -> int:
     from ..io import load_mesh
 
+    inputs = [args.target, args.weights]
     track = read_weights_file(args.weights, args.clamp)
+    output_paths(args.out, len(track.weights), inputs, args.format)
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
     r = retargeter(args)
     tgt = r.prepare(target)
-    verts = r.bake(tgt).evaluate(track.weights) if args.baked else r.animate(tgt, track.weights)
-    written = write_frames(args.out, verts, target.faces, [args.target, args.weights], args,
-                           fps=track.fps or 30.0)
+    verts = (r.bake(tgt).evaluate(track.weights) if args.baked
+             else r.animate(tgt, track.weights, progress=True))
+    written = write_frames(args.out, verts, target.faces, inputs, args, fps=track.fps or 30.0)
     print(f"wrote {len(verts)} frame(s) to {written[0] if len(written) == 1 else args.out}")
     return 0

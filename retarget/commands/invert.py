@@ -25,8 +25,9 @@ def run(args) -> int:
     if args.source_neutral:
         inputs.append(args.source_neutral)
     check_output(args.out, inputs)
-    frames = load_sequence(args.frames, up=args.up, forward=args.forward)
-    neutral = load_mesh(args.source_neutral, up=args.up, forward=args.forward) if args.source_neutral else None
+    frames = load_sequence(args.frames, up=args.up, forward=args.forward, force=args.force)
+    neutral = (load_mesh(args.source_neutral, up=args.up, forward=args.forward, force=args.force)
+               if args.source_neutral else None)
     w = retargeter(args).invert(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True)
     write_weights_csv(args.out, w.reshape(len(frames), -1), names=args.names, fps=args.fps)
     print(f"wrote {len(frames)} frame(s) of 53 weights to {args.out}")

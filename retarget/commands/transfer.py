@@ -1,7 +1,7 @@
 """``retarget transfer``: clone the expression(s) of a source mesh or sequence onto a target."""
 from __future__ import annotations
 
-from ._common import add_model_args, add_smooth_arg, retargeter, write_frames
+from ._common import add_model_args, add_smooth_arg, output_paths, retargeter, write_frames
 
 HELP = "clone expression(s) of SRC (a mesh, a folder or a glob of frames) onto the neutral TGT"
 EXAMPLE = """retarget transfer actor/frame_0001.obj character_neutral.obj -o smile.obj
@@ -23,12 +23,14 @@ def run(args) -> int:
     from ..io import load_mesh, load_sequence, sequence_files
 
     inputs = sequence_files(args.source) + [args.target]
-    frames = load_sequence(args.source, up=args.up, forward=args.forward)
+    if args.source_neutral:
+        inputs.append(args.source_neutral)
+    frames = load_sequence(args.source, up=args.up, forward=args.forward, force=args.force)
+    output_paths(args.out, len(frames), inputs, args.format)
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
     neutral = None
     if args.source_neutral:
-        neutral = load_mesh(args.source_neutral, up=args.up, forward=args.forward)
-        inputs.append(args.source_neutral)
+        neutral = load_mesh(args.source_neutral, up=args.up, forward=args.forward, force=args.force)
     r = retargeter(args)
     verts = r.transfer(frames, r.prepare(target), neutral, smooth=args.smooth, fps=args.fps,
                        progress=True)

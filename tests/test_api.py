@@ -1,0 +1,210 @@
+"""The Python API (retarget.api) on tiny head-like meshes with a tiny checkpoint made here: loading and
+refusing checkpoints, transfer / animate / invert / bake, units and offset invariance, awkward
+meshes, large meshes through the proxy, chunked decoding; decimation and temporal smoothing."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import retarget
+from nets.model import NFSConfig, NFSModel
+from retarget import api
+from retarget.api import Retargeter, check_head_like
+from retarget.checkpoint import CHECKPOINT_FORMAT, save_checkpoint
+from retarget.decimate import cluster_decimate, cluster_means
+from retarget.errors import RetargetError
+from retarget.mesh import Mesh
+from retarget.smoothing import one_euro, savgol, smooth_codes
+
+
+# ------------------------------------------------------------------------------- shared helpers
+def head_mesh(subdivisions: int = 2, scale: float = 1.0, offset=(0.0, 0.0, 0.0), name: str = "head",
+              smile: float = 0.0) -> Mesh:
+    """An icosphere stretched to a 16 x 22 x 18 cm head with a nose bump (+z) and, with ``smile``,
+    a mouth-corner lift; ``scale`` converts centimetres to other units (0.01: metres, 10: mm)."""
+    import trimesh
+
+    s = trimesh.creation.icosphere(subdivisions=subdivisions)
+    v = s.vertices * np.array([8.0, 11.0, 9.0])
+    front = v[:, 2] > 0
+    v[:, 2] += 3.0 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 8.0) * front
+    v[:, 1] += smile * np.exp(-((np.abs(v[:, 0]) - 4.0) ** 2 + (v[:, 1] + 5.0) ** 2) / 4.0) * front
+    return Mesh(v * scale + np.asarray(offset), s.faces, name)
+
+
+def tiny_checkpoint(path: Path, seed: int = 0, **overrides) -> Path:
+    """Save an untrained NFS model of the "tiny" preset (random weights, seeded) as a checkpoint."""
+    torch.manual_seed(seed)
+    cfg = NFSConfig.preset("tiny", **overrides)
+    save_checkpoint(Path(path), {"format": CHECKPOINT_FORMAT, "model_config": cfg.to_dict(),
+                                 "train_config": {}, "model": NFSModel(cfg).state_dict(), "step": 0})
+    return Path(path)
+
+
+@pytest.fixture(scope="module")
+def ckpt(tmp_path_factory):
+    return tiny_checkpoint(tmp_path_factory.mktemp("ckpt") / "tiny.pt")
+
+
+@pytest.fixture(scope="module")
+def r(ckpt, tmp_path_factory):
+    return Retargeter.load(ckpt, device="cpu", cache_dir=tmp_path_factory.mktemp("ops"))
+
+
+# ------------------------------------------------------------------------------- checkpoints
+def test_missing_bundled_checkpoint_message(monkeypatch, tmp_path):
+    monkeypatch.setattr(api, "default_checkpoint_path", lambda: tmp_path / "default.pt")
+    with pytest.raises(RetargetError, match=r"no bundled checkpoint at .*default\.pt; train one"):
+        Retargeter.load()
+
+
+def test_checkpoint_of_another_config_and_tampered_file_are_refused(tmp_path):
+    other = tiny_checkpoint(tmp_path / "other.pt", enc_width=32)
+    state = torch.load(other, weights_only=True)
+    state["model_config"] = NFSConfig.preset("tiny").to_dict()  # says tiny, holds wider weights
+    torch.save(state, tmp_path / "mismatch.pt")
+    with pytest.raises(RetargetError, match=r"mismatch\.pt: checkpoint does not match"):
+        Retargeter.load(tmp_path / "mismatch.pt")
+    state["model_config"]["no_such_field"] = 1
+    torch.save(state, tmp_path / "unknown_key.pt")
+    with pytest.raises(RetargetError, match=r"unknown_key\.pt: checkpoint does not match"):
+        Retargeter.load(tmp_path / "unknown_key.pt")
+    state["model_config"] = Path("pickled object")  # not a plain type: weights_only refuses it
+    torch.save(state, tmp_path / "tampered.pt")
+    with pytest.raises(RetargetError, match=r"tampered\.pt: not a loadable checkpoint"):
+        Retargeter.load(tmp_path / "tampered.pt")
+
+
+# ------------------------------------------------------------------------------- the four jobs
+def test_transfer_animate_invert_bake_shapes(r):
+    target = r.prepare(head_mesh(2))
+    src = [head_mesh(2, smile=s) for s in (0.0, 0.5, 1.0)]
+    one = r.transfer(src[1], target)
+    seq = r.transfer(src, target, source_neutral=src[0])
+    assert one.shape == (162, 3) and seq.shape == (3, 162, 3) and np.isfinite(seq).all()
+    assert not np.allclose(seq[0], seq[2])  # a different expression moves the target differently
+    w = r.invert(src[2])
+    ws = r.invert(src, smooth="savgol")
+    assert w.shape == (53,) and ws.shape == (3, 53) and (ws >= 0).all() and (ws <= 1).all()
+    assert len(retarget.FACS_NAMES) == 53 == len(set(retarget.FACS_NAMES))
+    named = r.animate(target, {"jawOpen": 0.7, "eyeBlink_L": 0.2})
+    arr = np.zeros(53, np.float32)
+    arr[retarget.FACS_NAMES.index("jawOpen")], arr[retarget.FACS_NAMES.index("eyeBlink_L")] = 0.7, 0.2
+    assert np.allclose(named, r.animate(target, arr))
+    rig = r.bake(target)
+    assert rig.deltas.shape == (53, 162, 3)
+    k = retarget.FACS_NAMES.index("jawOpen")
+    assert np.allclose(rig.evaluate(np.eye(53)[k]), r.animate(target, np.eye(53)[k]), atol=1e-5)
+    assert np.allclose(rig.evaluate(np.zeros((2, 53))), rig.neutral)
+
+
+def test_weight_names_and_shapes_are_checked(r):
+    target = r.prepare(head_mesh(2))
+    with pytest.raises(RetargetError, match="unknown FACS weight names: smileBig, zzz"):
+        r.animate(target, [{"jawOpen": 1.0}, {"zzz": 1.0, "smileBig": 0.5}])
+    with pytest.raises(RetargetError, match=r"got shape \(52,\)"):
+        r.animate(target, np.zeros(52))
+    with pytest.raises(RetargetError, match="unknown smoothing 'kalman'"):
+        smooth_codes(np.zeros((4, 3)), "kalman")
+
+
+def test_units_and_offset_invariance(r):
+    """The same heads in centimetres, in metres and in millimetres (shifted): the same expression
+    code, and target results equal up to the scale factor and the offset."""
+    results = {}
+    for unit, scale in (("cm", 1.0), ("m", 0.01), ("mm", 10.0)):
+        offset = np.array([3.0, -120.0, 40.0]) * scale
+        src = head_mesh(2, scale, offset, smile=1.0)
+        z = r.encode(src)
+        out = r.transfer(src, head_mesh(2, scale, offset))
+        results[unit] = (z, (out - offset) / scale)
+    for unit in ("m", "mm"):
+        assert np.allclose(results[unit][0], results["cm"][0], atol=1e-5)
+        assert np.allclose(results[unit][1], results["cm"][1], atol=1e-4)
+    # ... and the result does move the target (the comparison is not between two neutrals)
+    assert np.abs(results["cm"][1] - head_mesh(2).vertices).max() > 1e-3
+
+
+def _awkward_meshes() -> dict:
+    """Meshes a user may bring: with a hole, several components, a non-manifold edge."""
+    base = head_mesh(2)
+    holed = Mesh(base.vertices, base.faces[base.vertices[base.faces[:, 0], 2] < 7.5], "holed")
+    eye = head_mesh(1, 0.1, (3.0, 2.0, 9.0))
+    two = Mesh(np.vstack([base.vertices, eye.vertices]),
+               np.vstack([base.faces, eye.faces + base.n_vertices]), "two components")
+    a, b = base.faces[0, 0], base.faces[0, 1]  # an edge shared by two faces gets a third (a fin)
+    fin_v = np.vstack([base.vertices, base.vertices[[a, b]].mean(0) + [0.0, 0.0, 2.0]])
+    fin = Mesh(fin_v, np.vstack([base.faces, [[a, b, base.n_vertices]]]), "non-manifold")
+    return {"holed": holed, "two": two, "fin": fin}
+
+
+@pytest.mark.parametrize("kind", ["holed", "two", "fin"])
+def test_awkward_meshes_work_as_target_and_source(r, kind):
+    mesh = _awkward_meshes()[kind]
+    out = r.transfer(mesh, mesh)
+    assert out.shape == mesh.vertices.shape and np.isfinite(out).all()
+
+
+def test_objects_that_cannot_be_faces_are_refused(r):
+    flat = head_mesh(2)
+    flat.vertices[:, 2] *= 0.05  # a disc
+    flat.name = "plate.obj"
+    with pytest.raises(RetargetError, match=r"plate\.obj: not a face-sized object"):
+        r.prepare(flat)
+    with pytest.raises(RetargetError, match=r"plate\.obj: not a face-sized object"):
+        r.encode(flat)
+    few = head_mesh(0, name="ico.obj")  # 12 vertices
+    with pytest.raises(RetargetError, match=r"ico\.obj: only 12 vertices"):
+        check_head_like(few, "target")
+    check_head_like(head_mesh(2, 0.001))  # tiny units are fine: only proportions are judged
+
+
+# ------------------------------------------------------------------------------- large meshes
+def test_large_target_and_source_go_through_the_proxy(ckpt):
+    small = Retargeter.load(ckpt, device="cpu", proxy_vertices=300, chunk=100)
+    whole = Retargeter.load(ckpt, device="cpu", proxy_vertices=300, chunk=10**6)
+    mesh = head_mesh(3)  # 642 vertices
+    target = small.prepare(mesh)
+    assert target.proxy.n_vertices <= 300 and target.feat.shape == (642, 6)
+    assert target.codes.omega_skin.shape[0] == 642
+    src = head_mesh(3, smile=1.0)
+    z = small.encode(src, source_neutral=mesh)
+    assert z.shape == (128,) and np.isfinite(z).all()
+    out = small.decode(target, z)
+    assert out.shape == (642, 3) and np.isfinite(out).all()
+    assert np.allclose(out, whole.decode(whole.prepare(mesh), z), atol=1e-5)  # chunked == unchunked
+
+
+# ------------------------------------------------------------------------------- decimation
+def test_cluster_decimate_maps_every_vertex_and_keeps_valid_faces():
+    mesh = head_mesh(3)
+    (pv, pf), cluster = cluster_decimate(mesh.vertices, mesh.faces, 200)
+    assert 50 <= len(pv) <= 200 < mesh.n_vertices
+    assert cluster.shape == (642,) and set(np.unique(cluster)) == set(range(len(pv)))
+    assert pf.min() >= 0 and pf.max() < len(pv)
+    assert (pf[:, 0] != pf[:, 1]).all() and (pf[:, 1] != pf[:, 2]).all() and (pf[:, 0] != pf[:, 2]).all()
+    assert len(np.unique(np.sort(pf, axis=1), axis=0)) == len(pf)
+    assert np.allclose(pv, cluster_means(mesh.vertices, cluster))
+    # proxy vertices lie near the vertices they stand for
+    cell = np.linalg.norm(pv[cluster] - mesh.vertices, axis=1).max()
+    assert cell < 0.2 * np.ptp(mesh.vertices, axis=0).max()
+
+
+# ------------------------------------------------------------------------------- smoothing
+def test_one_euro_smooths_noise_and_settles_on_a_step():
+    rng = np.random.default_rng(0)
+    noisy = 0.5 + 0.05 * rng.standard_normal((300, 4))
+    out = one_euro(noisy, fps=30.0)
+    assert out[30:].std(axis=0).max() < 0.5 * noisy[30:].std(axis=0).min()
+    step = np.where(np.arange(90) < 30, 0.0, 1.0)[:, None]
+    filtered = one_euro(step, fps=30.0)
+    assert 0.0 < filtered[30, 0] < 1.0  # it lags...
+    assert abs(filtered[-1, 0] - 1.0) < 1e-3  # ...and keeps the final value
+
+
+def test_savgol_keeps_a_quadratic_exactly():
+    t = np.arange(30, dtype=np.float64)
+    quad = np.stack([0.01 * t ** 2 - 0.3 * t + 2.0, -0.5 * t ** 2], axis=1)
+    assert np.allclose(savgol(quad), quad, atol=1e-9)
+    assert np.allclose(smooth_codes(quad[:3], "savgol"), quad[:3])  # shorter than the window
