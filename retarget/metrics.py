@@ -45,3 +45,8 @@ def second_difference_jitter_mm(frames_cm: np.ndarray) -> float:
         raise ValueError(f"jitter needs at least 3 frames, got {f.shape[0]}")
     acc = f[2:] - 2.0 * f[1:-1] + f[:-2]
     return float(np.linalg.norm(acc, axis=-1).mean() * CM_TO_MM)
+
+
+def weight_mae(pred: np.ndarray, true: np.ndarray) -> float:
+    """Mean absolute error of FACS weights: pred, true (..., K) (unitless, in [0, 1])."""
+    return float(np.abs(np.asarray(pred, np.float64) - np.asarray(true, np.float64)).mean())

@@ -1,0 +1,57 @@
+"""``retarget eval``: the accuracy suites of DESIGN.md section 6 (``retarget.evaluate``)."""
+from __future__ import annotations
+
+HELP = "accuracy suites (self, cross-identity, cross-topology, inverse, jitter, real rig) as tables"
+EXAMPLE = """retarget eval --out results/eval
+retarget eval --checkpoint full=runs/full/model.pt no_skinning=runs/noskin/model.pt \\
+    --suite cross_identity cross_topology --heatmaps results/heatmaps --out results/eval
+retarget eval --config configs/eval/tiny.yaml --checkpoint runs/tiny/model.pt"""
+
+
+def add_arguments(p):
+    from ..evaluate import SUITES
+
+    p.add_argument("--checkpoint", action="extend", nargs="+", metavar="[NAME=]PATH",
+                   help="checkpoint(s) to evaluate, a table row each (e.g. the model and its "
+                        "ablations); default: the bundled retarget/checkpoints/default.pt")
+    p.add_argument("--suite", action="extend", nargs="+", choices=SUITES, metavar="NAME",
+                   help=f"run only these suites ({', '.join(SUITES)}); default: all")
+    p.add_argument("--config", help="eval config overriding configs/eval/default.yaml "
+                                    "(fixed seeds and sizes)")
+    p.add_argument("--out", help="folder for eval.json and eval.md")
+    p.add_argument("--heatmaps", metavar="DIR", help="write per-vertex error PNGs (YlOrRd, fixed mm scale)")
+    p.add_argument("--real-rig", help="the real ARKit rig npz (overrides real_rig.path)")
+    p.add_argument("--no-oracle", action="store_true",
+                   help="leave out the (u,v) displacement-transfer oracle row")
+    p.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run(args) -> int:
+    from pathlib import Path
+
+    from ..api import Retargeter
+    from ..evaluate import (SUITES, Evaluation, NetworkMethod, OracleMethod, load_eval_config,
+                            parse_checkpoints, to_markdown, write_heatmaps, write_results)
+
+    cfg = load_eval_config(args.config)
+    if args.real_rig:
+        cfg["real_rig"]["path"] = str(Path(args.real_rig).resolve())
+    checkpoints = parse_checkpoints(args.checkpoint)
+    methods = [NetworkMethod(name, Retargeter.load(path, device=args.device))
+               for name, path in checkpoints]
+    if not args.no_oracle:
+        methods.append(OracleMethod())
+    evaluation = Evaluation(cfg, methods, progress=not args.no_progress)
+    results = evaluation.run(args.suite or SUITES)
+    results["checkpoints"] = {name: str(path) for name, path in checkpoints}
+    markdown = to_markdown(results)
+    print(markdown)
+    if args.out:
+        for path in write_results(args.out, "eval", results, markdown):
+            print(f"wrote {path}")
+    if args.heatmaps:
+        h = cfg["heatmaps"]
+        for path in write_heatmaps(evaluation.samples, args.heatmaps, h["vmax_mm"], h["size"]):
+            print(f"wrote {path}")
+    return 0

@@ -1,0 +1,626 @@
+"""The accuracy suites of ``retarget eval`` (DESIGN.md section 6), as plain dicts and markdown.
+
+Test data are procedural rigs of *test* identities (``sample_identity(i, split="test")``), so every
+number below has exact ground truth unless a table says otherwise:
+
+- ``self``: source = target = one identity on one tessellation; GT = that rig with the source's weights.
+- ``cross_identity``: source identity A → target identity B (same tessellation); GT = B's rig with A's
+  weights.
+- ``cross_topology``: as cross-identity, source and target tessellated differently (coarse ↔ fine,
+  full head ↔ face crop, regular ↔ jittered).
+- ``inverse``: weights predicted from a frame of an identity's rig, re-applied to that rig: MSE to
+  the frame, and the weight MAE.
+- ``jitter``: cross-identity transfer of a smooth weight sequence: the mean norm of the second
+  difference of the vertex positions (mm), prediction vs GT, raw and with each temporal filter.
+- ``real_rig``: the artist-made ARKit rig ``makehuman_arkit.npz`` (one MakeHuman identity):
+  real → real self-retargeting and inversion of its frames (exact GT), procedural → real and
+  real → procedural (GT = the other rig driven by the same FACS weights: *semantic*, not exact,
+  because two artists' shapes of one name differ), per ARKit shape (one-hot) and on sampled weights.
+
+Every transfer suite also reports the segment-averaged MSE of NFS Table 1 (mean over the L = 20
+segments of each segment's MSE) and the per-segment MSE. Errors are in mm² (``retarget.metrics``).
+
+Methods are rows: one per checkpoint (the model and its ablations) and the classical oracle,
+displacement transfer through the known (u, v) correspondence (``retarget.oracle``), which needs
+(u, v) on both meshes and so has no real-rig or inverse-rigging numbers.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import time
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from data_synth.facs import FACS_NAMES, N_FACS, arkit_to_ict
+from data_synth.identity import sample_identity
+from data_synth.rig import build_rig
+from data_synth.sampling import sample_weights, smooth_sequence
+from data_synth.tessellate import tessellate
+
+from .errors import RetargetError
+from .mesh import Mesh
+from .metrics import segment_mse_mm2, second_difference_jitter_mm, squared_errors_mm2, weight_mae
+from .oracle import displacement_transfer, uv_transfer_matrix
+from .smoothing import FILTERS, smooth_codes
+
+SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig")
+TRANSFER_SUITES = ("self", "cross_identity", "cross_topology")
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_CONFIG = REPO_ROOT / "configs" / "eval" / "default.yaml"
+ORACLE_NAME = "oracle (u,v)"
+
+
+# ------------------------------------------------------------------------------------- config
+def load_eval_config(path=None) -> dict:
+    """The eval config: ``configs/eval/default.yaml`` (every key, the committed settings), with the
+    keys of ``path`` (e.g. ``configs/eval/tiny.yaml``) overriding it. RetargetError names the file
+    and the unknown key."""
+    from .train import merge
+
+    base = _read_yaml(DEFAULT_CONFIG)
+    if path is None or Path(path).resolve() == DEFAULT_CONFIG:
+        return base
+    return merge(base, _read_yaml(Path(path)), str(path))
+
+
+def _read_yaml(path: Path) -> dict:
+    try:
+        raw = yaml.safe_load(Path(path).read_text()) or {}
+    except OSError as e:
+        raise RetargetError(f"{path}: cannot read eval config ({e.strerror})") from None
+    except yaml.YAMLError as e:
+        raise RetargetError(f"{path}: not valid YAML ({e})") from None
+    if not isinstance(raw, dict):
+        raise RetargetError(f"{path}: an eval config must be a mapping")
+    return raw
+
+
+# ------------------------------------------------------------------------------------- ARKit
+def arkit_ict_matrix(arkit_names) -> np.ndarray:
+    """(K_arkit, 53) 0/1 matrix M: ICT weights = ARKit weights @ M (``browInnerUp`` and
+    ``cheekPuff`` feed both ICT halves, ``tongueOut`` none). Raises RetargetError for unknown names."""
+    index = {n: i for i, n in enumerate(FACS_NAMES)}
+    m = np.zeros((len(arkit_names), N_FACS))
+    for k, name in enumerate(arkit_names):
+        try:
+            for ict in arkit_to_ict(str(name)):
+                m[k, index[ict]] = 1.0
+        except KeyError:
+            raise RetargetError(f"real rig: {name!r} is not an ARKit blendshape name") from None
+    return m
+
+
+def ict_to_arkit_weights(w: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """ICT weights (..., 53) -> ARKit weights (..., K): each ARKit shape takes the mean of the ICT
+    weights it feeds (so ``browInnerUp`` = mean of the two halves; ``tongueOut`` = 0)."""
+    return np.asarray(w, np.float64) @ m.T / np.maximum(m.sum(axis=1), 1.0)
+
+
+# ------------------------------------------------------------------------------------- rigs
+@dataclass
+class RealRig:
+    """An ARKit blendshape rig read from an npz (``shared/rigs/makehuman_arkit.npz`` layout).
+
+    neutral (V,3) float32 cm; deltas (K,V,3) float32 cm; faces (F,3) int64; names (K,) ARKit names;
+    uv and segments are None (no parameter domain, no segmentation labels).
+    """
+
+    neutral: np.ndarray
+    deltas: np.ndarray
+    faces: np.ndarray
+    names: tuple
+    uv: None = None
+    segments: None = None
+
+    @classmethod
+    def load(cls, path) -> "RealRig":
+        path = Path(path)
+        if not path.is_file():
+            raise RetargetError(f"{path}: real rig not found (set real_rig.path in the eval config "
+                                f"or pass --real-rig)")
+        try:
+            with np.load(path, allow_pickle=False) as d:
+                rig = cls(d["neutral"].astype(np.float32), d["deltas"].astype(np.float32),
+                          d["faces"].astype(np.int64), tuple(str(n) for n in d["names"]))
+        except (OSError, ValueError, KeyError) as e:
+            raise RetargetError(f"{path}: not a readable rig npz with neutral, deltas, faces and "
+                                f"names ({e})") from None
+        if rig.deltas.shape != (len(rig.names), *rig.neutral.shape):
+            raise RetargetError(f"{path}: deltas {rig.deltas.shape} do not match neutral "
+                                f"{rig.neutral.shape} and {len(rig.names)} names")
+        return rig
+
+    def evaluate(self, weights) -> np.ndarray:
+        """neutral + weights·deltas: (K,) -> (V,3) or (T,K) -> (T,V,3), float32 cm."""
+        return self.neutral + np.tensordot(np.asarray(weights, np.float32), self.deltas,
+                                           axes=(-1, 0))
+
+
+@dataclass(eq=False)
+class Case:
+    """One test: a source rig driven by ``source_weights``, a target rig whose neutral is the target
+    mesh, and GT = the target rig driven by ``target_weights`` (the same FACS weights, in the
+    target rig's convention). ``exact``: the GT is exact (same surface) or only semantic."""
+
+    label: str
+    source: object
+    source_weights: np.ndarray
+    target: object
+    target_weights: np.ndarray
+    exact: bool = True
+
+    @cached_property
+    def source_frames(self) -> np.ndarray:
+        """(T,Vs,3) float32 cm."""
+        return self.source.evaluate(self.source_weights)
+
+    @cached_property
+    def gt(self) -> np.ndarray:
+        """(T,Vt,3) float32 cm."""
+        return self.target.evaluate(self.target_weights)
+
+
+class EvalData:
+    """The fixed test rigs and weights of one eval config (built lazily, cached)."""
+
+    def __init__(self, cfg: dict):
+        self.cfg = cfg
+        self._rigs: dict = {}
+        self._tess: dict = {}
+        self._real = None
+
+    def tessellation(self, spec: dict):
+        key = tuple(sorted(spec.items()))
+        if key not in self._tess:
+            self._tess[key] = tessellate(seed=self.cfg["seed"], **spec)
+        return self._tess[key]
+
+    def rig(self, identity: int, spec: dict | None = None):
+        """The rig of test identity ``identity`` on tessellation ``spec`` (default: the config's)."""
+        spec = spec or self.cfg["tessellation"]
+        key = (identity, tuple(sorted(spec.items())))
+        if key not in self._rigs:
+            z_id = sample_identity(self.cfg["seed"] + identity, split="test")
+            self._rigs[key] = build_rig(z_id, self.tessellation(spec), self.cfg["n_segments"])
+        return self._rigs[key]
+
+    def weights(self, suite: str, index: int, n: int | None = None) -> np.ndarray:
+        """(n,53) float32 weights of case ``index`` of ``suite`` (fixed seed per suite and case)."""
+        rng = np.random.default_rng([self.cfg["seed"], SUITES.index(suite), index])
+        return sample_weights(rng, n or self.cfg["expressions"], self.cfg["weights_mode"]).astype(np.float32)
+
+    def real_rig(self) -> RealRig:
+        if self._real is None:
+            self._real = RealRig.load(REPO_ROOT / self.cfg["real_rig"]["path"])  # relative: to the repo
+        return self._real
+
+    # ---- suites
+    def cases(self, suite: str) -> list[Case]:
+        """The cases of a transfer / inverse / jitter suite."""
+        n = self.cfg["identities"]
+        if suite in ("self", "inverse"):
+            return [Case(f"id {i}", self.rig(i), w, self.rig(i), w)
+                    for i in range(n) for w in [self.weights(suite, i)]]
+        if suite == "cross_identity":
+            return [Case(f"id {i} -> id {(i + 1) % n}", self.rig(i), w, self.rig((i + 1) % n), w)
+                    for i in range(n) for w in [self.weights(suite, i)]]
+        if suite == "cross_topology":
+            out = []
+            for p, pair in enumerate(self.cfg["cross_topology"]):
+                for i in range(self.cfg["cross_topology_identities"]):
+                    w = self.weights(suite, p * 1000 + i)
+                    out.append(Case(f"{pair['name']}: id {i} -> id {(i + 1) % n}",
+                                    self.rig(i, pair["source"]), w,
+                                    self.rig((i + 1) % n, pair["target"]), w))
+            return out
+        if suite == "jitter":
+            j = self.cfg["jitter"]
+            out = []
+            for i in range(j["identities"]):
+                rng = np.random.default_rng([self.cfg["seed"], SUITES.index(suite), i])
+                w = smooth_sequence(rng, j["frames"], j["fps"]).astype(np.float32)
+                out.append(Case(f"id {i} -> id {(i + 1) % n}", self.rig(i), w,
+                                self.rig((i + 1) % n), w))
+            return out
+        raise ValueError(f"no generic cases for suite {suite!r}")
+
+    def real_cases(self) -> dict[str, dict[str, Case]]:
+        """Real-rig cases by direction, each as one case of sampled weights and one of one-hot
+        ARKit shapes (``per_shape``). ICT weights are symmetrised on browInnerUp / cheekPuff so both
+        rigs receive equivalent weights."""
+        real, proc = self.real_rig(), self.rig(0)
+        m = arkit_ict_matrix(real.names)
+        sampled = ict_to_arkit_weights(self.weights("real_rig", 0, self.cfg["real_rig"]["expressions"]), m)
+        shapes = self.per_shape_names()
+        onehot = np.eye(len(real.names))[[real.names.index(s) for s in shapes]]
+        out = {}
+        for tag, a in (("sampled", sampled), ("per_shape", onehot)):
+            a = a.astype(np.float32)
+            w = (a @ m).astype(np.float32)
+            out[tag] = {
+                "real_to_real": Case("real -> real", real, a, real, a, exact=True),
+                "procedural_to_real": Case("procedural id 0 -> real", proc, w, real, a, exact=False),
+                "real_to_procedural": Case("real -> procedural id 0", real, a, proc, w, exact=False),
+                "invert": Case("invert real", real, a, real, a, exact=True),
+            }
+        return out
+
+    def per_shape_names(self) -> list[str]:
+        """ARKit shapes of the per-shape table: all with an ICT shape (tongueOut has none), or the
+        config's list."""
+        real = self.real_rig()
+        spec = self.cfg["real_rig"]["per_shape"]
+        names = [n for n in real.names if arkit_to_ict(n)] if spec == "all" else list(spec)
+        unknown = sorted(set(names) - set(real.names))
+        if unknown:
+            raise RetargetError(f"eval config: real_rig.per_shape names not in the rig: {unknown}")
+        return names
+
+
+# ------------------------------------------------------------------------------------- methods
+class NetworkMethod:
+    """A checkpoint, through the public API (``retarget.api.Retargeter``)."""
+
+    def __init__(self, name: str, retargeter):
+        self.name = name
+        self.r = retargeter
+        self._targets: dict = {}
+
+    def _target(self, rig):
+        if id(rig) not in self._targets:
+            self._targets[id(rig)] = (rig, self.r.prepare(Mesh(rig.neutral, rig.faces)))
+        return self._targets[id(rig)][1]
+
+    @staticmethod
+    def _source(case: Case) -> tuple[list[Mesh], Mesh]:
+        """(source frames, source neutral) as meshes; frames are encoded in the neutral's frame
+        and with its operators (``Retargeter.encode``)."""
+        return ([Mesh(f, case.source.faces) for f in case.source_frames],
+                Mesh(case.source.neutral, case.source.faces))
+
+    def transfer(self, case: Case, filters=(None,), fps: float = 30.0) -> dict:
+        """{filter: (T,Vt,3) cm prediction} for each temporal filter (None = raw codes); the
+        frames are encoded once and decoded once per filter (= ``Retargeter.transfer(smooth=f)``)."""
+        frames, neutral = self._source(case)
+        z = self.r.encode(frames, source_neutral=neutral)
+        target = self._target(case.target)
+        return {f: self.r.decode(target, z if f is None else smooth_codes(z, f, fps)) for f in filters}
+
+    def invert(self, case: Case) -> np.ndarray:
+        """(T,53) ICT weights in [0,1] predicted from the source frames."""
+        frames, neutral = self._source(case)
+        return self.r.invert(frames, source_neutral=neutral)
+
+
+class OracleMethod:
+    """Displacement transfer through the known (u, v) correspondence (``retarget.oracle``)."""
+
+    name = ORACLE_NAME
+
+    def __init__(self):
+        self._maps: dict = {}
+
+    def transfer(self, case: Case, filters=(None,), fps: float = 30.0) -> dict | None:
+        if case.source.uv is None or case.target.uv is None:
+            return None
+        key = (id(case.source), id(case.target))
+        if key not in self._maps:
+            self._maps[key] = (case, uv_transfer_matrix(case.source.uv, case.source.faces,
+                                                        case.target.uv))
+        pred = displacement_transfer(self._maps[key][1], case.source.neutral, case.source_frames,
+                                     case.target.neutral)
+        return {None: pred}
+
+    def invert(self, case: Case):
+        return None
+
+
+# ------------------------------------------------------------------------------------- metrics
+def case_errors(pred: np.ndarray, gt: np.ndarray, segments, n_segments: int) -> dict:
+    """Errors of one case: pred, gt (T,V,3) cm; segments (V,) or None.
+
+    Returns {"frame_mse_mm2": (T,), "per_segment_mm2": (L,) or None}.
+    """
+    sq = squared_errors_mm2(pred, gt)                                 # (T,V)
+    out = {"frame_mse_mm2": sq.mean(axis=1), "per_segment_mm2": None}
+    if segments is not None:
+        out["per_segment_mm2"] = segment_mse_mm2(pred, gt, segments, n_segments)[1]
+    return out
+
+
+def summarise(errors: list[dict]) -> dict:
+    """Pool case errors: MSE = mean over all frames of all cases; per-segment MSE = mean over cases
+    of each segment's MSE (NaN where no case has the segment); segment-averaged MSE = mean over
+    segments of the per-segment MSE."""
+    out = {"mse_mm2": float(np.mean(np.concatenate([e["frame_mse_mm2"] for e in errors]))),
+           "n_frames": int(sum(len(e["frame_mse_mm2"]) for e in errors))}
+    segs = [e["per_segment_mm2"] for e in errors if e["per_segment_mm2"] is not None]
+    if segs:
+        per_seg = np.stack(segs)
+        with np.errstate(all="ignore"):
+            valid = ~np.isnan(per_seg)
+            mean = np.where(valid.any(0), np.nansum(per_seg, 0) / np.maximum(valid.sum(0), 1), np.nan)
+        out["per_segment_mm2"] = [None if np.isnan(x) else float(x) for x in mean]
+        out["seg_mse_mm2"] = float(np.nanmean(mean))
+    return out
+
+
+# ------------------------------------------------------------------------------------- suites
+@dataclass
+class Evaluation:
+    """Runs the suites of one config for several methods; collects results and heatmap samples."""
+
+    cfg: dict
+    methods: list
+    progress: bool = True
+    data: EvalData = None
+    samples: list = field(default_factory=list)   # (suite, case, {method: (Vt,3) prediction})
+
+    def __post_init__(self):
+        self.data = self.data or EvalData(self.cfg)
+
+    def _bar(self, items, desc):
+        from tqdm import tqdm
+        return tqdm(items, desc=desc, disable=not self.progress, leave=False, dynamic_ncols=True)
+
+    def run(self, suites=SUITES) -> dict:
+        """{"config", "methods", "suites": {suite: {...}}} (see each ``suite_*`` method)."""
+        unknown = sorted(set(suites) - set(SUITES))
+        if unknown:
+            raise RetargetError(f"unknown eval suite(s) {unknown}; choose from {', '.join(SUITES)}")
+        out = {"config": copy.deepcopy(self.cfg), "methods": [m.name for m in self.methods],
+               "segment_names": list(self.data.rig(0).segment_names), "suites": {}}
+        for suite in [s for s in SUITES if s in suites]:
+            t0 = time.monotonic()
+            out["suites"][suite] = getattr(self, f"suite_{suite}")()
+            out["suites"][suite]["seconds"] = round(time.monotonic() - t0, 1)
+        return out
+
+    def _transfer_suite(self, suite: str) -> dict:
+        cases = self.data.cases(suite)
+        n_keep = self.cfg["heatmaps"]["samples"]
+        keep = [{} for _ in cases[:n_keep]]
+        res = {"exact_gt": True, "cases": [c.label for c in cases], "methods": {}}
+        for m in self.methods:
+            errs, by_group = [], {}
+            for i, case in enumerate(self._bar(cases, f"{suite} [{m.name}]")):
+                preds = m.transfer(case)
+                if preds is None:
+                    break
+                pred = preds[None]                                       # raw codes, (T,Vt,3)
+                e = case_errors(pred, case.gt, case.target.segments, self.cfg["n_segments"])
+                errs.append(e)
+                by_group.setdefault(case.label.split(":")[0], []).append(e)
+                if i < n_keep:
+                    keep[i][m.name] = pred[0]
+            if errs:
+                res["methods"][m.name] = summarise(errs)
+                if suite == "cross_topology":
+                    res["methods"][m.name]["pairs"] = {g: summarise(v) for g, v in by_group.items()}
+        self.samples += [(suite, c, k) for c, k in zip(cases, keep)]
+        return res
+
+    def suite_self(self) -> dict:
+        return self._transfer_suite("self")
+
+    def suite_cross_identity(self) -> dict:
+        return self._transfer_suite("cross_identity")
+
+    def suite_cross_topology(self) -> dict:
+        return self._transfer_suite("cross_topology")
+
+    def suite_inverse(self) -> dict:
+        """Inverse rigging: rig MSE of the re-evaluated predicted weights, and the weight MAE."""
+        res = {"exact_gt": True, "methods": {}}
+        for m in self.methods:
+            errs, maes = [], []
+            for case in self._bar(self.data.cases("inverse"), f"inverse [{m.name}]"):
+                w = m.invert(case)
+                if w is None:
+                    break
+                errs.append(case_errors(case.source.evaluate(w), case.source_frames,
+                                        case.source.segments, self.cfg["n_segments"]))
+                maes.append(weight_mae(w, case.source_weights))
+            if errs:
+                res["methods"][m.name] = {**summarise(errs), "weight_mae": float(np.mean(maes))}
+        return res
+
+    def suite_jitter(self) -> dict:
+        """Jitter (mm) and MSE (mm²) of a smooth sequence transferred across identities, raw and
+        with each temporal filter of ``retarget.smoothing``; the GT's own jitter for reference."""
+        cases = self.data.cases("jitter")
+        fps = self.cfg["jitter"]["fps"]
+        res = {"exact_gt": True, "fps": fps, "frames": self.cfg["jitter"]["frames"],
+               "gt_jitter_mm": float(np.mean([second_difference_jitter_mm(c.gt) for c in cases])),
+               "methods": {}}
+        filters = (None, *FILTERS)
+        for m in self.methods:
+            rows: dict = {}
+            for case in self._bar(cases, f"jitter [{m.name}]"):
+                preds = m.transfer(case, filters, fps)
+                for f, pred in preds.items():
+                    rows.setdefault(f or "raw", []).append(
+                        (second_difference_jitter_mm(pred), float(squared_errors_mm2(pred, case.gt).mean())))
+            res["methods"][m.name] = {f: {"jitter_mm": float(np.mean([r[0] for r in v])),
+                                          "mse_mm2": float(np.mean([r[1] for r in v]))}
+                                      for f, v in rows.items()}
+        return res
+
+    def suite_real_rig(self) -> dict:
+        """The real ARKit rig (see the module docstring); ``per_shape``: one-hot ARKit shapes."""
+        real_cases = self.data.real_cases()
+        shapes = self.data.per_shape_names()
+        m_arkit = arkit_ict_matrix(self.data.real_rig().names)
+        res = {"path": str(self.cfg["real_rig"]["path"]), "shapes": shapes,
+               "exact_gt": {k: c.exact for k, c in real_cases["sampled"].items()}, "methods": {}}
+        for m in self.methods:
+            if isinstance(m, OracleMethod):       # the real rig has no (u, v)
+                continue
+            entry = {}
+            for tag, cases in real_cases.items():
+                block = {}
+                for key, case in self._bar(list(cases.items()), f"real rig {tag} [{m.name}]"):
+                    if key == "invert":
+                        a = ict_to_arkit_weights(m.invert(case), m_arkit)
+                        frame_mse = squared_errors_mm2(case.source.evaluate(a), case.source_frames).mean(1)
+                        used = m_arkit.sum(1) > 0          # tongueOut has no ICT shape
+                        mae = np.abs(a - case.source_weights)[:, used].mean(1)
+                        block[key] = {"rig_mse_mm2": frame_mse, "weight_mae": mae}
+                    else:
+                        pred = m.transfer(case)[None]                # raw codes
+                        block[key] = {"mse_mm2": squared_errors_mm2(pred, case.gt).mean(1)}
+                if tag == "sampled":
+                    entry[tag] = {k: {n: float(np.mean(v)) for n, v in b.items()} for k, b in block.items()}
+                else:
+                    entry[tag] = {s: {f"{k}.{n}": float(v[j]) for k, b in block.items() for n, v in b.items()}
+                                  for j, s in enumerate(shapes)}
+            res["methods"][m.name] = entry
+        return res
+
+
+# ------------------------------------------------------------------------------------- markdown
+def fmt(x) -> str:
+    """A number for a table: 4 significant digits; '—' for missing."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "—"
+    return f"{x:.4g}"
+
+
+def md_table(header: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(header) + " |",
+             "| " + " | ".join(["---"] + ["---:"] * (len(header) - 1)) + " |"]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def to_markdown(results: dict) -> str:
+    """All suites of ``Evaluation.run`` as markdown tables (mm² unless stated)."""
+    s, methods = results["suites"], results["methods"]
+    out = []
+
+    def get(suite, m, *keys):
+        d = s.get(suite, {}).get("methods", {}).get(m)
+        for k in keys:
+            d = d.get(k) if isinstance(d, dict) else None
+        return d
+
+    for suite, title in (("self", "Self-retargeting"), ("cross_identity", "Cross-identity"),
+                         ("cross_topology", "Cross-topology")):
+        if suite not in s:
+            continue
+        out.append(f"### {title} (exact GT; MSE in mm², segment-averaged as NFS Table 1)\n")
+        groups = []
+        if suite == "cross_topology":
+            groups = list(dict.fromkeys(p["name"] for p in results["config"]["cross_topology"]))
+        header = ["method", "MSE", "segment-avg MSE"] + [f"{g} (MSE / seg)" for g in groups]
+        rows = [[m, fmt(get(suite, m, "mse_mm2")), fmt(get(suite, m, "seg_mse_mm2"))]
+                + [f"{fmt(get(suite, m, 'pairs', g, 'mse_mm2'))} / {fmt(get(suite, m, 'pairs', g, 'seg_mse_mm2'))}"
+                   for g in groups] for m in methods]
+        out.append(md_table(header, rows) + "\n")
+        per_seg = {m: get(suite, m, "per_segment_mm2") for m in methods}
+        seg_rows = [[f"{i}: {name}"] + [fmt(per_seg[m][i] if per_seg[m] else None) for m in methods]
+                    for i, name in enumerate(results["segment_names"])]
+        out.append(f"<details><summary>{title}: MSE per segment (mm²)</summary>\n\n"
+                   + md_table(["segment"] + methods, seg_rows) + "\n\n</details>\n")
+    if "inverse" in s:
+        out.append("### Inverse rigging (exact GT: predicted weights re-applied to the identity's rig)\n")
+        rows = [[m, fmt(get("inverse", m, "mse_mm2")), fmt(get("inverse", m, "seg_mse_mm2")),
+                 fmt(get("inverse", m, "weight_mae"))] for m in methods]
+        out.append(md_table(["method", "rig MSE", "segment-avg MSE", "weight MAE"], rows) + "\n")
+    if "jitter" in s:
+        j = s["jitter"]
+        filters = ["raw", *FILTERS]
+        out.append(f"### Jitter (smooth {j['frames']}-frame sequences at {j['fps']:g} fps, cross-identity; "
+                   f"mean |second difference| in mm, GT: {fmt(j['gt_jitter_mm'])} mm)\n")
+        header = ["method"] + [f"{f} jitter (mm) / MSE" for f in filters]
+        rows = [[m] + [f"{fmt(get('jitter', m, f, 'jitter_mm'))} / {fmt(get('jitter', m, f, 'mse_mm2'))}"
+                       for f in filters] for m in methods]
+        out.append(md_table(header, rows) + "\n")
+    if "real_rig" in s:
+        r = s["real_rig"]
+        out.append("### Real ARKit rig (makehuman_arkit.npz; sampled weights; MSE in mm²)\n\n"
+                   "real → real and inversion have exact GT; procedural ↔ real GT is the other rig "
+                   "driven by the same weights (semantic, not exact).\n")
+        header = ["method", "real→real MSE (exact)", "invert: rig MSE (exact)",
+                  "invert: weight MAE (exact)", "procedural→real MSE (semantic)",
+                  "real→procedural MSE (semantic)"]
+        keys = [("real_to_real", "mse_mm2"), ("invert", "rig_mse_mm2"), ("invert", "weight_mae"),
+                ("procedural_to_real", "mse_mm2"), ("real_to_procedural", "mse_mm2")]
+        rows = [[m] + [fmt(get("real_rig", m, "sampled", *k)) for k in keys]
+                for m in methods if m in r["methods"]]
+        out.append(md_table(header, rows) + "\n")
+        for m in [m for m in methods if m in r["methods"]][:1]:
+            cols = ["real_to_real.mse_mm2", "invert.rig_mse_mm2", "invert.weight_mae",
+                    "procedural_to_real.mse_mm2", "real_to_procedural.mse_mm2"]
+            per = r["methods"][m]["per_shape"]
+            rows = [[shape] + [fmt(per[shape][c]) for c in cols] for shape in r["shapes"]]
+            out.append(f"<details><summary>Real rig per ARKit shape (one-hot), {m}</summary>\n\n"
+                       + md_table(["shape"] + header[1:], rows) + "\n\n</details>\n")
+    return "\n".join(out)
+
+
+# ------------------------------------------------------------------------------------- heatmaps
+def write_heatmaps(samples, out_dir, vmax_mm: float, size: int = 256) -> list[Path]:
+    """One PNG per sample: the GT expression (shaded) then each method's per-vertex error
+    (distance in mm, YlOrRd on the fixed scale [0, vmax_mm]) on its prediction."""
+    from .render import Renderer, contact_sheet, heatmap_colors, save_png
+
+    renderer = Renderer(size)
+    out_dir = Path(out_dir)
+    paths = []
+    for n, (suite, case, preds) in enumerate(samples):
+        if not preds:
+            continue
+        faces, gt = case.target.faces, case.gt[0]
+        images = [renderer.render(gt, faces, mode="shaded")]
+        labels = [f"{suite} GT (0-{vmax_mm:g} mm)"]
+        for name, pred in preds.items():
+            err = np.sqrt(squared_errors_mm2(pred, gt))
+            images.append(renderer.render(pred, faces, mode="colors",
+                                          vertex_colors=heatmap_colors(err, vmax_mm)))
+            labels.append(f"{name}: MSE {np.mean(err ** 2):.3g} mm^2")   # the label font has no ²
+        path = out_dir / f"{n:02d}_{suite}.png"
+        save_png(path, contact_sheet(images, labels, cols=len(images)))
+        paths.append(path)
+    return paths
+
+
+# ------------------------------------------------------------------------------------- CLI helpers
+def parse_checkpoints(specs) -> list[tuple[str, Path]]:
+    """``--checkpoint`` values ``NAME=PATH`` or ``PATH`` (named by the file stem) -> [(name, path)].
+    None or empty: the bundled default checkpoint. RetargetError for a missing file or a repeated
+    name."""
+    from .api import default_checkpoint_path
+
+    out = []
+    for spec in specs or [str(default_checkpoint_path())]:
+        name, sep, path = spec.partition("=")
+        if not sep or Path(spec).exists():
+            name, path = Path(spec).stem, spec
+        path = Path(path)
+        if not path.is_file():
+            raise RetargetError(f"{path}: checkpoint not found (train one with `retarget train`, or "
+                                f"pass --checkpoint [NAME=]PATH)")
+        if name in [n for n, _ in out]:
+            raise RetargetError(f"checkpoint name {name!r} given twice; use NAME=PATH to tell them apart")
+        out.append((name, path))
+    return out
+
+
+def write_results(out_dir, stem: str, results: dict, markdown: str) -> tuple[Path, Path]:
+    """Write ``OUT/stem.json`` and ``OUT/stem.md`` atomically; returns both paths."""
+    import json
+
+    from .io import atomic_output
+
+    paths = Path(out_dir) / f"{stem}.json", Path(out_dir) / f"{stem}.md"
+    with atomic_output(paths[0]) as tmp:
+        Path(tmp).write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
+    with atomic_output(paths[1]) as tmp:
+        Path(tmp).write_text(markdown + "\n")
+    return paths

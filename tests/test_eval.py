@@ -1,0 +1,216 @@
+"""retarget eval: metrics on known answers, the (u,v) oracle, every suite on a tiny checkpoint."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from data_synth.facs import ARKIT_NAMES, FACS_NAMES
+from data_synth.identity import sample_identity
+from data_synth.rig import build_rig
+from data_synth.tessellate import tessellate
+from nets.model import NFSConfig, NFSModel
+from retarget.cli import main
+from retarget.errors import RetargetError
+from retarget.evaluate import (SUITES, Evaluation, OracleMethod, RealRig, EvalData, arkit_ict_matrix,
+                               case_errors, ict_to_arkit_weights, load_eval_config,
+                               parse_checkpoints, summarise, to_markdown)
+from retarget.metrics import mse_mm2, second_difference_jitter_mm, segment_mse_mm2, weight_mae
+from retarget.oracle import displacement_transfer, locate, uv_transfer_matrix
+from retarget.train import CHECKPOINT_FORMAT, save_checkpoint
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ROOT / "configs" / "eval" / "tiny.yaml"
+REAL_RIG = ROOT.parent / "shared" / "rigs" / "makehuman_arkit.npz"
+
+
+def tiny_checkpoint(path: Path, **overrides) -> Path:
+    """An untrained tiny model in the inference checkpoint format of ``Trainer.export``."""
+    torch.manual_seed(0)
+    model = NFSModel(NFSConfig.preset("tiny", **overrides))
+    save_checkpoint(path, {"format": CHECKPOINT_FORMAT, "model_config": model.cfg.to_dict(),
+                           "train_config": {}, "model": model.state_dict(), "step": 0})
+    return path
+
+
+def tiny_config():
+    cfg = load_eval_config(TINY)
+    cfg["real_rig"]["path"] = str(REAL_RIG)
+    return cfg
+
+
+# ------------------------------------------------------------------------------------- metrics
+def test_metrics_known_answers():
+    rng = np.random.default_rng(0)
+    gt = rng.normal(size=(3, 50, 3))
+    assert mse_mm2(gt, gt) == 0.0
+    d = np.array([0.1, -0.2, 0.3])                       # cm
+    assert mse_mm2(gt + d, gt) == pytest.approx(100 * (d ** 2).sum())
+    seg = rng.integers(0, 4, 50)
+    mean, per = segment_mse_mm2(gt + d, gt, seg, 5)
+    assert mean == pytest.approx(100 * (d ** 2).sum())
+    assert np.isnan(per[4]) and np.allclose(per[:4], 100 * (d ** 2).sum())
+
+
+def test_segment_average_hand_made():
+    gt = np.zeros((4, 3))
+    pred = gt.copy()
+    pred[:, 0] = [0.1, 0.1, 0.1, 0.4]                      # cm -> 1, 1, 1, 16 mm²
+    mean, per = segment_mse_mm2(pred, gt, np.array([0, 0, 0, 1]), 3)
+    assert per[:2] == pytest.approx([1.0, 16.0])
+    assert mean == pytest.approx(8.5)                      # (1 + 16) / 2, the empty segment skipped
+    assert mse_mm2(pred, gt) == pytest.approx(19.0 / 4)    # vertex mean differs
+    # pooled over two cases: per-segment means of the cases, then the mean over segments
+    other = case_errors(gt[None] + 0.2, gt[None], np.array([0, 0, 1, 1]), 3)   # 12 mm² everywhere
+    pooled = summarise([case_errors(pred[None], gt[None], np.array([0, 0, 0, 1]), 3), other])
+    assert pooled["per_segment_mm2"][:2] == pytest.approx([6.5, 14.0])
+    assert pooled["per_segment_mm2"][2] is None
+    assert pooled["seg_mse_mm2"] == pytest.approx(10.25)
+    assert pooled["mse_mm2"] == pytest.approx((19.0 / 4 + 12.0) / 2)
+
+
+def test_jitter_and_weight_mae():
+    t = np.arange(10.0)[:, None, None]
+    linear = np.ones((10, 5, 3)) * t * np.array([1.0, 0, 0])
+    assert second_difference_jitter_mm(linear) == pytest.approx(0.0, abs=1e-12)
+    quadratic = np.ones((10, 5, 3)) * t ** 2 * np.array([0, 0.05, 0])   # second difference 0.1 cm
+    assert second_difference_jitter_mm(quadratic) == pytest.approx(1.0)
+    assert weight_mae(np.full(53, 0.25), np.zeros(53)) == pytest.approx(0.25)
+
+
+def test_arkit_weight_mapping():
+    m = arkit_ict_matrix(ARKIT_NAMES)
+    w = np.zeros(53)
+    w[FACS_NAMES.index("browInnerUp_L")] = 1.0
+    w[FACS_NAMES.index("mouthSmile_R")] = 0.5
+    a = ict_to_arkit_weights(w, m)
+    assert a[ARKIT_NAMES.index("browInnerUp")] == pytest.approx(0.5)       # mean of the halves
+    assert a[ARKIT_NAMES.index("mouthSmileRight")] == pytest.approx(0.5)
+    assert a[ARKIT_NAMES.index("tongueOut")] == 0.0 and a.sum() == pytest.approx(1.0)
+    back = a @ m
+    assert back[FACS_NAMES.index("browInnerUp_R")] == pytest.approx(0.5)
+    with pytest.raises(RetargetError, match="not an ARKit"):
+        arkit_ict_matrix(["smileLeft"])
+
+
+# ------------------------------------------------------------------------------------- oracle
+def test_oracle_exact_on_one_tessellation_and_close_across():
+    z = sample_identity(0, split="test")
+    a = build_rig(z, tessellate(600, "regular", seed=0))
+    b = build_rig(z, tessellate(1500, "jittered", seed=1))
+    w = np.random.default_rng(1).uniform(0, 1, (2, 53)).astype(np.float32)
+    m = uv_transfer_matrix(a.uv, a.faces, a.uv)
+    assert np.allclose(m.sum(axis=1), 1.0)
+    same = displacement_transfer(m, a.neutral, a.evaluate(w), a.neutral)
+    assert mse_mm2(same, a.evaluate(w)) < 1e-8
+    cross = displacement_transfer(uv_transfer_matrix(a.uv, a.faces, b.uv), a.neutral,
+                                  a.evaluate(w), b.neutral)
+    motion = mse_mm2(b.evaluate(w), b.neutral[None])
+    assert mse_mm2(cross, b.evaluate(w)) < 0.05 * motion      # interpolation error only
+
+
+def test_oracle_locates_and_falls_back_to_nearest():
+    uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    face, bary, inside = locate(uv, faces, np.array([[0.2, 0.2], [0.9, 0.8], [2.0, 2.0]]))
+    assert list(face[:2]) == [0, 1] and list(inside) == [True, True, False]
+    assert np.allclose(bary[0], [0.6, 0.2, 0.2])
+    m = uv_transfer_matrix(uv, faces, np.array([[2.0, 2.0], [-1.0, 0.1]])).toarray()
+    assert np.allclose(m, [[0, 0, 0, 1], [1, 0, 0, 0]])
+
+
+# ------------------------------------------------------------------------------------- suites
+class GroundTruthMethod:
+    """A stand-in method that returns the GT moved by a constant offset (cm)."""
+
+    def __init__(self, offset):
+        self.name, self.offset = "gt+offset", np.asarray(offset, float)
+
+    def transfer(self, case, filters=(None,), fps=30.0):
+        return {f: case.gt + self.offset for f in filters}
+
+    def invert(self, case):
+        return case.source_weights
+
+
+def test_suites_score_ground_truth_zero_and_a_known_offset():
+    cfg = tiny_config()
+    d = np.array([0.0, 0.2, 0.1])
+    expected = 100 * (d ** 2).sum()
+    res = Evaluation(cfg, [GroundTruthMethod(d), OracleMethod()], progress=False).run(
+        ["self", "cross_topology", "inverse", "jitter"])["suites"]
+    gt = res["self"]["methods"]["gt+offset"]
+    assert gt["mse_mm2"] == pytest.approx(expected) and gt["seg_mse_mm2"] == pytest.approx(expected)
+    assert res["self"]["methods"]["oracle (u,v)"]["mse_mm2"] < 1e-8
+    assert res["cross_topology"]["methods"]["gt+offset"]["mse_mm2"] == pytest.approx(expected)
+    inv = res["inverse"]["methods"]["gt+offset"]
+    assert inv["mse_mm2"] < 1e-8 and inv["weight_mae"] == 0.0
+    assert "oracle (u,v)" not in res["inverse"]["methods"]
+    jit = res["jitter"]["methods"]["gt+offset"]["raw"]
+    assert jit["jitter_mm"] == pytest.approx(res["jitter"]["gt_jitter_mm"])
+
+
+@pytest.mark.skipif(not REAL_RIG.exists(), reason="shared/rigs/makehuman_arkit.npz not present")
+def test_every_suite_on_a_tiny_checkpoint(tmp_path):
+    a = tiny_checkpoint(tmp_path / "full.pt")
+    b = tiny_checkpoint(tmp_path / "noskin.pt", use_skinning=False)
+    out, heat = tmp_path / "out", tmp_path / "heat"
+    rc = main(["eval", "--config", str(TINY), "--checkpoint", f"full={a}", "--checkpoint", str(b),
+               "--real-rig", str(REAL_RIG), "--out", str(out), "--heatmaps", str(heat),
+               "--no-progress"])
+    assert rc == 0
+    res = json.loads((out / "eval.json").read_text())
+    assert set(res["suites"]) == set(SUITES)
+    for suite in ("self", "cross_identity", "cross_topology", "jitter"):
+        assert set(res["suites"][suite]["methods"]) == {"full", "noskin", "oracle (u,v)"}, suite
+    assert res["suites"]["self"]["methods"]["oracle (u,v)"]["mse_mm2"] < 1e-8
+    assert res["suites"]["self"]["methods"]["full"]["mse_mm2"] > 0
+    assert len(res["suites"]["self"]["methods"]["full"]["per_segment_mm2"]) == 20
+    real = res["suites"]["real_rig"]["methods"]["full"]
+    assert set(real["per_shape"]) == {"jawOpen", "eyeBlinkLeft"}
+    assert real["sampled"]["invert"]["weight_mae"] >= 0
+    md = (out / "eval.md").read_text()
+    for title in ("Self-retargeting", "Cross-identity", "Cross-topology", "Inverse rigging",
+                  "Jitter", "Real ARKit rig", "| full |", "| oracle (u,v) |"):
+        assert title in md
+    pngs = sorted(heat.glob("*.png"))
+    assert len(pngs) == 3 and all(p.stat().st_size > 100 for p in pngs)
+
+
+def test_real_rig_self_retargeting_ground_truth_is_exact():
+    if not REAL_RIG.exists():
+        pytest.skip("real rig not present")
+    cfg = tiny_config()
+    cases = EvalData(cfg).real_cases()["per_shape"]
+    c = cases["real_to_real"]
+    assert c.exact and not cases["procedural_to_real"].exact
+    jaw = ["jawOpen", "eyeBlinkLeft"].index("jawOpen")
+    rig = RealRig.load(REAL_RIG)
+    assert np.allclose(c.gt[jaw], rig.neutral + rig.deltas[rig.names.index("jawOpen")])
+    # the procedural source receives the same FACS weights in ICT form
+    w = cases["procedural_to_real"].source_weights[jaw]
+    assert w[FACS_NAMES.index("jawOpen")] == 1.0 and w.sum() == 1.0
+
+
+def test_markdown_marks_missing_rows():
+    res = {"methods": ["a"], "segment_names": ["s0"], "config": {"cross_topology": []},
+           "suites": {"inverse": {"methods": {}}}}
+    assert "| a | — | — | — |" in to_markdown(res)
+
+
+# ------------------------------------------------------------------------------------- errors
+def test_config_and_checkpoint_errors(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("identitiez: 3\n")
+    with pytest.raises(RetargetError, match=r"bad\.yaml.*identitiez"):
+        load_eval_config(bad)
+    with pytest.raises(RetargetError, match="checkpoint not found"):
+        parse_checkpoints([str(tmp_path / "missing.pt")])
+    ck = tiny_checkpoint(tmp_path / "m.pt")
+    assert parse_checkpoints([f"mine={ck}", str(ck)]) == [("mine", ck), ("m", ck)]
+    with pytest.raises(RetargetError, match="given twice"):
+        parse_checkpoints([str(ck), f"m={ck}"])
+    with pytest.raises(RetargetError, match="real rig not found"):
+        RealRig.load(tmp_path / "none.npz")
+    assert main(["eval", "--config", str(TINY), "--checkpoint", str(tmp_path / "x.pt")]) == 2
