@@ -34,7 +34,6 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from data_synth.facs import FACS_NAMES, N_FACS, arkit_to_ict
 from data_synth.identity import sample_identity
@@ -42,6 +41,7 @@ from data_synth.rig import build_rig
 from data_synth.sampling import sample_weights, smooth_sequence
 from data_synth.tessellate import tessellate
 
+from .config import merge, read_yaml
 from .errors import RetargetError
 from .mesh import Mesh
 from .metrics import segment_mse_mm2, second_difference_jitter_mm, squared_errors_mm2, weight_mae
@@ -60,24 +60,10 @@ def load_eval_config(path=None) -> dict:
     """The eval config: ``configs/eval/default.yaml`` (every key, the committed settings), with the
     keys of ``path`` (e.g. ``configs/eval/tiny.yaml``) overriding it. RetargetError names the file
     and the unknown key."""
-    from .train import merge
-
-    base = _read_yaml(DEFAULT_CONFIG)
+    base = read_yaml(DEFAULT_CONFIG, "eval config")
     if path is None or Path(path).resolve() == DEFAULT_CONFIG:
         return base
-    return merge(base, _read_yaml(Path(path)), str(path))
-
-
-def _read_yaml(path: Path) -> dict:
-    try:
-        raw = yaml.safe_load(Path(path).read_text()) or {}
-    except OSError as e:
-        raise RetargetError(f"{path}: cannot read eval config ({e.strerror})") from None
-    except yaml.YAMLError as e:
-        raise RetargetError(f"{path}: not valid YAML ({e})") from None
-    if not isinstance(raw, dict):
-        raise RetargetError(f"{path}: an eval config must be a mapping")
-    return raw
+    return merge(base, read_yaml(path, "eval config"), str(path))
 
 
 # ------------------------------------------------------------------------------------- ARKit

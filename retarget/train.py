@@ -13,7 +13,6 @@ nccl on CUDA), so every process keeps identical parameters.
 """
 from __future__ import annotations
 
-import copy
 import csv
 import math
 import os
@@ -24,11 +23,11 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.distributed as dist
-import yaml
 
 from nets import losses as L
 from nets.model import NFSConfig, NFSModel
 
+from .config import merge, read_yaml
 from .checkpoint import CHECKPOINT_FORMAT, load_checkpoint, model_from_checkpoint, save_checkpoint
 from .errors import RetargetError
 from .metrics import CM_TO_MM, segment_mse_mm2
@@ -55,33 +54,9 @@ DEFAULTS = {
 
 
 # ------------------------------------------------------------------------------------- config
-def merge(defaults: dict, overrides: dict, where: str) -> dict:
-    """Recursively override ``defaults``; unknown keys raise RetargetError naming ``where``."""
-    out = copy.deepcopy(defaults)
-    for key, value in (overrides or {}).items():
-        if key not in defaults:
-            raise RetargetError(f"{where}: unknown key {key!r} (known: {', '.join(defaults)})")
-        if isinstance(defaults[key], dict) and key != "pairs" and not isinstance(value, dict):
-            raise RetargetError(f"{where}: {key!r} must be a mapping")
-        if isinstance(defaults[key], dict) and key not in ("model",):
-            out[key] = merge(defaults[key], value, f"{where}.{key}")
-        else:
-            out[key] = value
-    return out
-
-
 def load_config(path) -> dict:
     """Read a training YAML and fill in defaults. RetargetError names the file and the bad key."""
-    path = Path(path)
-    try:
-        raw = yaml.safe_load(path.read_text()) or {}
-    except OSError as e:
-        raise RetargetError(f"{path}: cannot read training config ({e.strerror})") from None
-    except yaml.YAMLError as e:
-        raise RetargetError(f"{path}: not valid YAML ({e})") from None
-    if not isinstance(raw, dict):
-        raise RetargetError(f"{path}: a training config must be a mapping")
-    cfg = merge(DEFAULTS, raw, str(path))
+    cfg = merge(DEFAULTS, read_yaml(path, "training config"), str(path), replace=("model",))
     model_cfg(cfg, str(path))  # validates the model section
     return cfg
 
