@@ -47,9 +47,11 @@ def validate_config(cfg: dict) -> dict:
     out = {**DEFAULTS, **cfg}
     _require(out["split"] in SPLITS, "split", f"must be one of {SPLITS}, got {out['split']!r}")
     for key in ("n_identities", "expressions_per_identity", "shard_size"):
-        _require(isinstance(out[key], int) and out[key] >= 1, key, f"must be an integer >= 1, got {out[key]!r}")
+        _require(isinstance(out[key], int) and out[key] >= 1, key,
+                 f"must be an integer >= 1, got {out[key]!r}")
     for key in ("identity_seed", "seed"):
-        _require(isinstance(out[key], int) and out[key] >= 0, key, f"must be an integer >= 0, got {out[key]!r}")
+        _require(isinstance(out[key], int) and out[key] >= 0, key,
+                 f"must be an integer >= 0, got {out[key]!r}")
     _require(isinstance(out["stylised_share"], (int, float)) and 0 <= out["stylised_share"] <= 1,
              "stylised_share", f"must be in [0, 1], got {out['stylised_share']!r}")
     _require(out["weights"] in MODES, "weights", f"must be one of {MODES}, got {out['weights']!r}")
@@ -61,8 +63,9 @@ def validate_config(cfg: dict) -> dict:
         key = f"tessellations[{i}]"
         _require(isinstance(spec, dict) and set(spec) <= {"n_vertices", "kind", "region", "holes"},
                  key, "must be a mapping with n_vertices, kind, region, holes")
-        _require(isinstance(spec.get("n_vertices", 5000), int) and 100 <= spec.get("n_vertices", 5000) <= 2_000_000,
-                 f"{key}.n_vertices", "must be an integer in [100, 2000000]")
+        n = spec.get("n_vertices", 5000)
+        _require(isinstance(n, int) and 100 <= n <= 2_000_000, f"{key}.n_vertices",
+                 "must be an integer in [100, 2000000]")
         _require(spec.get("kind", "regular") in KINDS, f"{key}.kind", f"must be one of {KINDS}")
         _require(spec.get("region", "full") in REGIONS, f"{key}.region", f"must be one of {REGIONS}")
         _require(isinstance(spec.get("holes", True), bool), f"{key}.holes", "must be true or false")
@@ -121,10 +124,12 @@ def _write_shard(path: Path, items: list[dict]) -> None:
     _atomic_write(path, write)
 
 
-def write_shards(out_dir, items_iter: Iterable[dict], shard_size: int, progress=None) -> list[Path]:
+def write_shards(out_dir, items_iter: Iterable[dict], shard_size: int, progress=None,
+                 config: dict | None = None) -> list[Path]:
     """Write items into `out_dir/shard_XXXXX.npz` (shard_size items each) and `index.json`.
 
-    progress: optional callable(n_items_done) (e.g. a tqdm update). Returns the shard paths.
+    progress: optional callable(n_items) (e.g. a tqdm update); config: the generating config, kept
+    in index.json for reproducibility. Returns the shard paths.
     """
     if shard_size < 1:
         raise ValueError(f"write_shards: shard_size must be >= 1, got {shard_size}")
@@ -147,7 +152,8 @@ def write_shards(out_dir, items_iter: Iterable[dict], shard_size: int, progress=
             flush()
     if batch:
         flush()
-    index = {"shards": [p.name for p in paths], "counts": counts, "fields": list(FIELDS)}
+    index = {"shards": [p.name for p in paths], "counts": counts, "fields": list(FIELDS),
+             "config": config}
     _atomic_write(out / "index.json", lambda tmp: Path(tmp).write_text(json.dumps(index, indent=1)))
     return paths
 
@@ -155,7 +161,8 @@ def write_shards(out_dir, items_iter: Iterable[dict], shard_size: int, progress=
 class ShardReader:
     """Random access to the items of a shard directory written by `write_shards`.
 
-    len(reader), reader[i] -> dict of arrays, iteration in order. Keeps one shard open.
+    len(reader), reader[i] -> dict of arrays, iteration in order; .config: the generating config
+    (or None). Keeps one shard open.
     """
 
     def __init__(self, directory):
@@ -165,6 +172,7 @@ class ShardReader:
             raise ValueError(f"ShardReader: {index_path} not found (not a shard directory?)")
         index = json.loads(index_path.read_text())
         self.shards = index["shards"]
+        self.config = index.get("config")
         self.offsets = np.concatenate([[0], np.cumsum(index["counts"])]).astype(int)
         self._open = (None, None)
 

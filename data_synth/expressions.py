@@ -23,12 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import head
-from .facs import FACS_NAMES, N_FACS
+from .facs import FACS_NAMES
 from .head import MOUTH_E, MOUTH_HALF_W, EYE_A, EYE_HALF_W, gauss, smoothstep
 from .identity import mirror_identity
 
 MIRROR = np.array([-1.0, 1.0, 1.0])
-LID_PIVOT_DEPTH = 1.2   # cm behind the eyeball centre: lid margins slide nearly vertically
+GAZE_PIVOT_DEPTH = 2.5  # cm behind the eyeball centre: small lid motions slide nearly vertically
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ def jaw_weights(a, e):
     side = np.abs(a)
     beyond = np.maximum(side - MOUTH_HALF_W, 0.0)
     line = MOUTH_E + 0.36 * beyond
-    half = head.slit_half_height(a) + 0.004 + 0.3 * beyond
+    half = head.slit_half_height(a) + 0.004 + 0.5 * beyond
     w = 1.0 - smoothstep(line - half, line + half, e)
     w *= 1.0 - 0.5 * gauss(side - MOUTH_HALF_W, 0.07) * gauss(e - MOUTH_E, 0.07)   # corners go half-way
     w *= 1.0 - smoothstep(1.35, 1.8, side)
@@ -132,11 +132,12 @@ def _jaw_open(ctx):
 
 
 # ----------------------------------------------------------------------------- eyelids
-def _lid_frame(ctx):
-    """Per-point quantities of the left eye: clipped azimuth, margins, lid weights (cached)."""
-    cache = getattr(ctx, "_lid_cache", None)
-    if cache is not None:
-        return cache
+def _lid_frame(ctx, pivot_depth):
+    """Per-point quantities of the left eye for lid rotations about the pivot `pivot_depth` cm
+    behind the eyeball centre: margins, lid weights, opening angle (kept in ctx.cache)."""
+    key = ("lid", pivot_depth)
+    if key in ctx.cache:
+        return ctx.cache[key]
     a, e = ctx.a, ctx.e
     s = (a - EYE_A) / EYE_HALF_W
     lateral = np.exp(-(np.maximum(np.abs(s) - 0.8, 0.0) / 0.5) ** 2) * (a > 0)
@@ -146,17 +147,21 @@ def _lid_frame(ctx):
     lam = np.clip((e - e_lo) / gap, 0.0, 1.0)
     w_up = np.where(e >= e_up, 1.0 - smoothstep(e_up, e_up + 0.13, e), lam) * lateral
     w_lo = np.where(e <= e_lo, 1.0 - smoothstep(e_lo, e_lo - 0.09, e), 1.0 - lam) * lateral
+    t = np.clip((e - e_up) / 0.13, 0.0, 1.0)
+    fold = np.sin(np.pi * t) ** 2 * lateral                    # 0 at the margin and at the brow
     near = (w_up > 0) | (w_lo > 0)
     p_up = np.zeros_like(ctx.points)
     p_lo = np.zeros_like(ctx.points)
     p_up[near] = ctx.at_template(a_clip[near], e_up[near])
     p_lo[near] = ctx.at_template(a_clip[near], e_lo[near])
-    centre = ctx.eyeball_centres[0] - np.array([0.0, 0.0, LID_PIVOT_DEPTH])
-    angle = lambda p: np.arctan2(p[:, 1] - centre[1], p[:, 2] - centre[2])  # noqa: E731
-    opening = np.where(near, angle(p_up) - angle(p_lo), 0.0)   # rad, seen from the eye centre
-    cache = dict(w_up=w_up, w_lo=w_lo, p_up=p_up, p_lo=p_lo, opening=opening, centre=centre)
-    ctx._lid_cache = cache
-    return cache
+    centre = ctx.eyeball_centres[0] - np.array([0.0, 0.0, pivot_depth])
+
+    def elevation(p):
+        return np.arctan2(p[:, 1] - centre[1], p[:, 2] - centre[2])
+    opening = np.where(near, elevation(p_up) - elevation(p_lo), 0.0)   # rad, seen from the pivot
+    ctx.cache[key] = dict(w_up=w_up, w_lo=w_lo, fold=fold, p_up=p_up, p_lo=p_lo, opening=opening,
+                          centre=centre)
+    return ctx.cache[key]
 
 
 def _rotate_about_x_per_point(rel, angle):
@@ -168,16 +173,19 @@ def _rotate_about_x_per_point(rel, angle):
     return out
 
 
-def _lid_motion(ctx, upper=0.0, lower=0.0, yaw=0.0, close=False):
-    """Left eyelid motion (V,3), skinned rotations about the lid pivot (LID_PIVOT_DEPTH behind the
-    eyeball centre, so the lids roll over the eye).
+def _lid_motion(ctx, upper=0.0, lower=0.0, yaw=0.0, close=False, unfold=0.0,
+                pivot_depth=GAZE_PIVOT_DEPTH):
+    """Left eyelid motion (V,3): skinned rotations about a pivot on the eye's axis, `pivot_depth` cm
+    behind the eyeball centre (0: the eyeball centre itself, so the lids roll over the eye).
 
     upper/lower: rotation of the upper/lower lid margin as a fraction of the opening angle seen from
     the pivot (positive = down); a lid point rotates by its lid weight times the angle of its margin
     (same azimuth). yaw (rad): sideways rotation of both lids (gaze in/out). close=True adds, with
     the squared lid weight, the residual that lands the upper margin exactly on the moved lower one.
+    unfold (cm): extra downward slide of the upper-lid skin between margin and crease (zero at the
+    margin), as the lid fold flattens when the eye closes.
     """
-    f = _lid_frame(ctx)
+    f = _lid_frame(ctx, pivot_depth)
     c = f["centre"]
     rel = ctx.points - c
     g_up = upper * f["opening"]
@@ -190,6 +198,8 @@ def _lid_motion(ctx, upper=0.0, lower=0.0, yaw=0.0, close=False):
         out += (f["w_up"] ** 2)[:, None] * residual
     if yaw:
         out += _rotate(ctx.points, c, _rot_y(yaw), np.maximum(f["w_up"], f["w_lo"]))
+    if unfold:
+        out[:, 1] -= unfold * f["fold"]
     return out
 
 
@@ -198,55 +208,55 @@ def _lid_motion(ctx, upper=0.0, lower=0.0, yaw=0.0, close=False):
 # callable. Vectors are tuned against a real ARKit rig (docs/CALIBRATION.md).
 _UL, _LL = "upper", "lower"
 _LEFT_OR_SYMMETRIC = {
-    "browDown": ("lobes", (Lobe(0.13, 0.59, 0.09, 0.07, (-0.3, -0.55, 0.08)),
-                           Lobe(0.32, 0.61, 0.13, 0.07, (-0.05, -0.3, 0.0)),
+    "browDown": ("lobes", (Lobe(0.13, 0.59, 0.12, 0.09, (-0.3, -0.5, 0.08)),
+                           Lobe(0.32, 0.61, 0.16, 0.09, (-0.05, -0.3, 0.0)),
                            Lobe(0.07, 0.5, 0.05, 0.06, (-0.1, -0.15, 0.1))), False),
     "browInnerUp": ("lobes", (Lobe(0.11, 0.62, 0.09, 0.09, (0.0, 0.45, 0.0)),
                               Lobe(0.1, 0.78, 0.12, 0.1, (0.0, 0.15, 0.0))), False),
     "browOuterUp": ("lobes", (Lobe(0.45, 0.6, 0.12, 0.08, (0.0, 0.65, -0.1)),), False),
     "cheekPuff": ("lobes", (Lobe(0.42, -0.22, 0.17, 0.14, (0.0, 0.0, 1.25), "normal"),
                             Lobe(0.2, -0.2, 0.08, 0.1, (0.1, 0.0, 0.2))), False),
-    "cheekSquint": ("lobes", (Lobe(0.5, 0.08, 0.16, 0.09, (0.08, 0.7, -0.1)),
-                              Lobe(0.36, 0.3, 0.1, 0.05, (0.0, 0.25, 0.0))), False),
-    "eyeBlink": ("lid", dict(upper=0.85, lower=-0.15, close=True), ()),
+    "cheekSquint": ("lobes", (Lobe(0.5, 0.08, 0.2, 0.12, (0.08, 0.65, -0.1)),
+                              Lobe(0.36, 0.3, 0.13, 0.06, (0.0, 0.25, 0.0))), False),
+    "eyeBlink": ("lid", dict(upper=0.85, lower=-0.15, close=True, unfold=0.4, pivot_depth=0.0), ()),
     "eyeLookDown": ("lid", dict(upper=0.35, lower=0.15), ()),
-    "eyeLookIn": ("lid", dict(yaw=-0.035), ()),
-    "eyeLookOut": ("lid", dict(yaw=0.035), ()),
+    "eyeLookIn": ("lid", dict(yaw=-0.025), ()),
+    "eyeLookOut": ("lid", dict(yaw=0.025), ()),
     "eyeLookUp": ("lid", dict(upper=-0.22, lower=-0.1), ()),
     "eyeSquint": ("lid", dict(upper=0.1, lower=-0.3),
-                  (Lobe(EYE_A + 0.05, 0.33, 0.1, 0.05, (-0.2, 0.15, 0.0)),)),
+                  (Lobe(EYE_A + 0.05, 0.33, 0.14, 0.07, (-0.2, 0.15, 0.0)),)),
     "eyeWide": ("lid", dict(upper=-0.35, lower=0.05), ()),
     "jawForward": lambda ctx: _jaw(ctx, shift=(0.0, -0.1, 0.85)),
     "jawLeft": lambda ctx: _jaw(ctx, yaw=0.06, shift=(0.25, 0.0, 0.0)),
     "jawOpen": _jaw_open,
     "mouthClose": lambda ctx: _mouth_close(ctx),
-    "mouthDimple": ("lobes", (Lobe(0.28, -0.255, 0.08, 0.08, (0.45, 0.35, -0.45)),), False),
-    "mouthFrown": ("lobes", (Lobe(0.27, -0.26, 0.08, 0.07, (0.15, -0.55, 0.05)),
-                             Lobe(0.3, -0.4, 0.1, 0.1, (0.05, -0.25, 0.0))), False),
-    "mouthFunnel": ("lobes", (Lobe(0.0, -0.215, 0.17, 0.05, (0.0, 0.1, 0.5), gate=_UL),
-                              Lobe(0.0, -0.3, 0.17, 0.07, (0.0, -0.75, 0.45), gate=_LL),
-                              Lobe(0.0, -0.5, 0.2, 0.15, (0.0, -0.3, 0.0)),
+    "mouthDimple": ("lobes", (Lobe(0.28, -0.255, 0.12, 0.11, (0.45, 0.35, -0.45)),), False),
+    "mouthFrown": ("lobes", (Lobe(0.27, -0.26, 0.11, 0.09, (0.15, -0.5, 0.05)),
+                             Lobe(0.3, -0.4, 0.13, 0.13, (0.05, -0.25, 0.0))), False),
+    "mouthFunnel": ("lobes", (Lobe(0.0, -0.215, 0.2, 0.07, (0.0, 0.1, 0.5), gate=_UL),
+                              Lobe(0.0, -0.3, 0.2, 0.09, (0.0, -0.7, 0.45), gate=_LL),
+                              Lobe(0.0, -0.5, 0.24, 0.18, (0.0, -0.3, 0.0)),
                               Lobe(0.25, -0.255, 0.07, 0.06, (-0.35, 0.0, 0.2))), True),
-    "mouthLeft": ("lobes", (Lobe(0.0, -0.27, 0.3, 0.12, (0.9, 0.3, -0.05)),
+    "mouthLeft": ("lobes", (Lobe(0.0, -0.27, 0.35, 0.16, (0.85, 0.3, -0.05)),
                             Lobe(0.27, -0.255, 0.08, 0.08, (0.1, 0.1, -0.2))), False),
-    "mouthLowerDown": ("lobes", (Lobe(0.12, -0.31, 0.1, 0.06, (0.3, -0.4, 0.05), gate=_LL),), False),
-    "mouthPress": ("lobes", (Lobe(0.2, -0.255, 0.1, 0.06, (0.45, 0.3, 0.0)),
-                             Lobe(0.1, -0.3, 0.1, 0.05, (0.15, 0.3, 0.0), gate=_LL),
-                             Lobe(0.1, -0.22, 0.1, 0.05, (0.1, -0.1, 0.0), gate=_UL)), False),
-    "mouthPucker": ("lobes", (Lobe(0.0, -0.255, 0.17, 0.09, (0.0, 0.0, 0.7)),
-                              Lobe(0.25, -0.255, 0.08, 0.07, (-0.6, 0.0, 0.25))), True),
+    "mouthLowerDown": ("lobes", (Lobe(0.15, -0.31, 0.11, 0.08, (0.3, -0.4, 0.05), gate=_LL),), False),
+    "mouthPress": ("lobes", (Lobe(0.2, -0.255, 0.13, 0.09, (0.45, 0.3, 0.0)),
+                             Lobe(0.1, -0.3, 0.13, 0.07, (0.15, 0.3, 0.0), gate=_LL),
+                             Lobe(0.1, -0.22, 0.13, 0.07, (0.1, -0.1, 0.0), gate=_UL)), False),
+    "mouthPucker": ("lobes", (Lobe(0.0, -0.255, 0.22, 0.13, (0.0, 0.0, 0.7)),
+                              Lobe(0.25, -0.255, 0.1, 0.09, (-0.6, 0.0, 0.25))), True),
     "mouthRollLower": ("lobes", (Lobe(0.0, -0.3, 0.17, 0.04, (0.0, 0.4, -0.2), gate=_LL),
                                  Lobe(0.0, -0.39, 0.17, 0.05, (0.0, 0.3, 0.25))), True),
-    "mouthRollUpper": ("lobes", (Lobe(0.0, -0.225, 0.17, 0.04, (0.0, -0.8, -0.45), gate=_UL),), True),
+    "mouthRollUpper": ("lobes", (Lobe(0.0, -0.225, 0.2, 0.06, (0.0, -0.75, -0.45), gate=_UL),), True),
     "mouthShrugLower": ("lobes", (Lobe(0.0, -0.35, 0.18, 0.08, (0.0, 0.4, 0.25), gate=_LL),
-                                  Lobe(0.0, -0.6, 0.15, 0.12, (0.0, 0.3, 0.2))), True),
+                                  Lobe(0.0, -0.55, 0.12, 0.08, (0.0, 0.3, 0.2))), True),
     "mouthShrugUpper": ("lobes", (Lobe(0.0, -0.2, 0.2, 0.06, (0.0, 0.45, -0.1), gate=_UL),), True),
-    "mouthSmile": ("lobes", (Lobe(0.27, -0.255, 0.1, 0.08, (0.55, 1.0, -0.4)),
-                             Lobe(0.42, -0.1, 0.16, 0.14, (0.15, 0.45, 0.1)),
+    "mouthSmile": ("lobes", (Lobe(0.27, -0.255, 0.12, 0.1, (0.55, 1.0, -0.4)),
+                             Lobe(0.42, -0.1, 0.2, 0.17, (0.15, 0.45, 0.1)),
                              Lobe(0.12, -0.25, 0.1, 0.05, (0.2, 0.25, -0.1))), False),
-    "mouthStretch": ("lobes", (Lobe(0.27, -0.27, 0.1, 0.08, (0.55, -0.35, -0.2)),
-                               Lobe(0.15, -0.3, 0.1, 0.06, (0.3, -0.2, 0.0), gate=_LL)), False),
-    "mouthUpperUp": ("lobes", (Lobe(0.12, -0.2, 0.1, 0.06, (0.1, 0.5, 0.0), gate=_UL),), False),
+    "mouthStretch": ("lobes", (Lobe(0.27, -0.27, 0.11, 0.09, (0.55, -0.35, -0.2)),
+                               Lobe(0.15, -0.3, 0.13, 0.08, (0.3, -0.2, 0.0), gate=_LL)), False),
+    "mouthUpperUp": ("lobes", (Lobe(0.15, -0.2, 0.11, 0.08, (0.1, 0.5, 0.0), gate=_UL),), False),
     "noseSneer": ("lobes", (Lobe(0.1, 0.15, 0.07, 0.1, (-0.15, 0.25, 0.05)),
                             Lobe(0.09, 0.06, 0.05, 0.05, (-0.1, 0.2, 0.0)),
                             Lobe(0.22, 0.2, 0.1, 0.12, (-0.45, -0.05, 0.05)),
@@ -257,8 +267,8 @@ _MIRROR_PAIRS = {"jawRight": "jawLeft", "mouthRight": "mouthLeft"}
 
 def _mouth_close(ctx):
     """Corrective: cancels jawOpen on the lower lip (pushes it up) and lowers the upper lip."""
-    lower_lip = (1.0 - lip_gate_upper(ctx.a, ctx.e)) * (1.0 - smoothstep(-0.34, -0.62, ctx.e))
-    lower_lip *= np.exp(-(ctx.a / 0.32) ** 4)
+    lower_lip = (1.0 - lip_gate_upper(ctx.a, ctx.e)) * (1.0 - smoothstep(-0.34, -0.72, ctx.e))
+    lower_lip *= np.exp(-(ctx.a / 0.38) ** 4)
     upper = _lobe_field(ctx, (Lobe(0.0, -0.215, 0.2, 0.05, (0.0, -0.12, 0.0), gate=_UL),))
     return -lower_lip[:, None] * _jaw_open(ctx) + upper
 
@@ -290,15 +300,17 @@ def _split(name):
 def expression_deltas(uv, identity, names=FACS_NAMES) -> np.ndarray:
     """Displacements (K, V, 3) float64 cm of the named expressions (default: all 53, ICT order) at
     disc coordinates uv (V,2) for identity z_ID (J,)."""
+    unknown = [n for n in names if n not in FACS_NAMES]
+    if unknown:
+        raise ValueError(f"expression_deltas: unknown expression names {unknown}; see FACS_NAMES")
     uv = np.asarray(uv, dtype=np.float64)
     ctx = head.SurfaceSample(uv, identity)
-    needs_mirror = any(_split(n)[1] for n in names)
-    ctx_m = head.SurfaceSample(uv * np.array([-1.0, 1.0]), mirror_identity(identity)) if needs_mirror else None
+    ctx_m = None
+    if any(_split(n)[1] for n in names):
+        ctx_m = head.SurfaceSample(uv * np.array([-1.0, 1.0]), mirror_identity(identity))
     out = np.empty((len(names), len(uv), 3))
     for k, name in enumerate(names):
         base, right = _split(name)
         out[k] = _evaluate(base, ctx_m) * MIRROR if right else _evaluate(base, ctx)
     return out
 
-
-assert set(_split(n)[0] for n in FACS_NAMES) == set(_LEFT_OR_SYMMETRIC) and N_FACS == 53

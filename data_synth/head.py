@@ -6,9 +6,10 @@ Parameter chain (every step is an orientation-preserving diffeomorphism, so a te
     (u, v) in the unit disc  --chart-->  template angles (a, e)  --warp(z_ID)-->  geometric angles
     (a', e')  -->  direction d(a', e') from the star centre O  -->  p = O + R(d, a, e; z_ID) * d
 
-- The disc is an azimuthal map centred on the crown: radius rho = (pi/2 - e) / THETA_MAX (polar
-  angle from +y), polar angle alpha with a = alpha - AZIMUTH_GAIN * sin(alpha), which magnifies the
-  front (+z, v > 0) where the face is. rho = 1 is the neck cut.
+- The disc is an azimuthal map centred on the crown: the polar angle from +y is theta(rho) (linear
+  up to rho = NECK_RHO, then slowing down so that the neck, seen at grazing angles from O, is not
+  stretched), the polar angle alpha gives a = alpha - AZIMUTH_GAIN * sin(alpha), which magnifies
+  the front (+z, v > 0) where the face is. rho = 1 is the neck cut (theta = THETA_MAX).
 - a is the azimuth (0 = front, +x = the character's left), e the elevation seen from O.
 - The surface is star-shaped about O: R > 0 is a function of the direction only, so the surface
   never self-intersects and a triangle of the domain keeps its orientation in 3D.
@@ -24,8 +25,9 @@ import numpy as np
 
 from .identity import head_params
 
-THETA_MAX = 0.9 * np.pi          # polar angle of the neck cut (rad)
+THETA_MAX = 0.88 * np.pi         # polar angle of the neck cut (rad): about 5 cm below the chin
 AZIMUTH_GAIN = 0.3               # front magnification of the disc chart
+NECK_RHO, NECK_KAPPA = 0.82, 40.0   # d(theta)/d(rho) falls to 1/(1 + kappa (rho - NECK_RHO)^2)
 STAR_CENTRE = np.array([0.0, -3.0, -2.0])   # O, cm (head frame: origin near the skull centre)
 
 # Template landmarks (rad), fixed for every identity: the holes live here.
@@ -63,13 +65,38 @@ def smin(r1, r2, k):
 
 
 # ----------------------------------------------------------------------------- chart
+def _theta_shape(rho):
+    """Unscaled polar angle: rho up to NECK_RHO, then an arctan ramp (C2, monotone)."""
+    k = np.sqrt(NECK_KAPPA)
+    beyond = np.maximum(rho - NECK_RHO, 0.0)
+    return np.minimum(rho, NECK_RHO) + np.arctan(k * beyond) / k
+
+
+_THETA_SCALE = THETA_MAX / _theta_shape(1.0)
+
+
+def theta_of_rho(rho):
+    """Polar angle from +y (rad) at disc radius rho (...,)."""
+    return _THETA_SCALE * _theta_shape(rho)
+
+
+def rho_of_theta(theta):
+    """Inverse of `theta_of_rho` (Newton; the map is monotone)."""
+    target = np.asarray(theta, dtype=np.float64) / _THETA_SCALE
+    rho = np.minimum(target, NECK_RHO)
+    for _ in range(30):
+        slope = 1.0 / (1.0 + NECK_KAPPA * np.maximum(rho - NECK_RHO, 0.0) ** 2)
+        rho = rho - (_theta_shape(rho) - target) / slope
+    return rho
+
+
 def uv_to_template(uv):
     """(..., 2) disc coordinates -> template azimuth a and elevation e, each (...,) rad."""
     uv = np.asarray(uv, dtype=np.float64)
     rho = np.hypot(uv[..., 0], uv[..., 1])
     alpha = np.arctan2(uv[..., 0], uv[..., 1])
     a = alpha - AZIMUTH_GAIN * np.sin(alpha)
-    e = 0.5 * np.pi - THETA_MAX * rho
+    e = 0.5 * np.pi - theta_of_rho(rho)
     return a, e
 
 
@@ -79,7 +106,7 @@ def template_to_uv(a, e):
     alpha = a.copy()
     for _ in range(8):   # Newton on alpha - g sin(alpha) = a (derivative >= 1 - g > 0)
         alpha -= (alpha - AZIMUTH_GAIN * np.sin(alpha) - a) / (1.0 - AZIMUTH_GAIN * np.cos(alpha))
-    rho = (0.5 * np.pi - np.asarray(e, dtype=np.float64)) / THETA_MAX
+    rho = rho_of_theta(0.5 * np.pi - np.asarray(e, dtype=np.float64))
     return np.stack([rho * np.sin(alpha), rho * np.cos(alpha)], axis=-1)
 
 
@@ -125,18 +152,16 @@ def in_mouth_slit(a, e):
 
 
 def hole_boundaries(n_eye=400, n_mouth=600):
-    """Closed template polylines of the holes: list of (a (n,), e (n,)) counter-clockwise in (a, e).
+    """Closed template polylines of the holes: list of (a (n,), e (n,)) in rad.
 
     Order: left eye, right eye, mouth. Dense; `tessellate` resamples them.
     """
     out = []
     t = np.linspace(0.0, 2.0 * np.pi, n_eye, endpoint=False)
+    a_side = EYE_A + EYE_HALF_W * np.cos(t)
+    e = eye_centre_line(a_side) + EYE_HALF_H * np.abs(np.sin(t)) ** (2 * EYE_EXPONENT) * np.sign(np.sin(t))
     for side in (1.0, -1.0):
-        a_side = EYE_A + EYE_HALF_W * np.cos(t)
-        h = EYE_HALF_H * np.abs(np.sin(t)) ** (2 * EYE_EXPONENT) * np.sign(np.sin(t))
-        e = eye_centre_line(a_side) + h
-        a = side * a_side
-        out.append((a, e) if side > 0 else (a[::-1], e[::-1]))
+        out.append((side * a_side, e))
     t = np.linspace(0.0, 2.0 * np.pi, n_mouth, endpoint=False)
     a = MOUTH_HALF_W * np.cos(t)
     e = MOUTH_E + SLIT_HALF_H * np.abs(np.sin(t)) ** (2 * SLIT_EXPONENT) * np.sign(np.sin(t))
@@ -155,7 +180,8 @@ def warp(a, e, P):
     eye_l, eye_r = a - EYE_A, a + EYE_A
     a2 = (a
           + P["eye_shift"] * (gauss(eye_l, 0.16) - gauss(eye_r, 0.16)) * ge
-          + P["eye_scale"] * (eye_l * gauss(eye_l, 0.14) + eye_r * gauss(eye_r, 0.14)) * gauss(e - EYE_E, 0.12)
+          + P["eye_scale"] * (eye_l * gauss(eye_l, 0.14) + eye_r * gauss(eye_r, 0.14))
+          * gauss(e - EYE_E, 0.12)
           + P["mouth_scale"] * a * gauss(a, 0.3) * gauss(e - MOUTH_E, 0.12))
     t = e - MOUTH_E
     e1 = e - MOUTH_COMPRESS * np.exp(-(a2 / 0.42) ** 4) * t * gauss(t, MOUTH_COMPRESS_SIGMA)
@@ -223,7 +249,7 @@ def _mouth_region(a, e, P):
     taper = np.clip(1.0 - s * s, 0.0, None) ** 1.5           # lips thin out toward the corners
     upper = P["lip_upper_h"] * taper * gauss(e - MOUTH_E - 0.045, 0.03)
     lower = P["lip_lower_h"] * taper * gauss(e - MOUTH_E + 0.055, 0.038)
-    crease = -0.3 * gauss(a, MOUTH_HALF_W) * gauss(e - MOUTH_E, 0.012)
+    crease = -0.3 * np.exp(-(a / (1.05 * MOUTH_HALF_W)) ** 6) * gauss(e - MOUTH_E, 0.012)
     bulge = P["mouth_bulge"] * gauss(a, 0.3) * gauss(e - MOUTH_E, 0.13)
     sulcus = -0.2 * gauss(a, 0.15) * gauss(e - MOUTH_E + 0.2, 0.06)
     return upper + lower + crease + bulge + sulcus
@@ -261,32 +287,47 @@ def eye_open_mask(a, e):
 
 
 def eyeball_centres(P):
-    """(2, 3) eyeball centres (left, right) in cm for head parameters P."""
+    """(2, 3) eyeball centres (left, right) in cm for head parameters P: behind the centre of each
+    eye opening along +z (gaze straight ahead), the front of the ball `eye_protrusion` cm in front
+    of the socket surface."""
     a0 = np.array([EYE_A, -EYE_A])
     e0 = np.full(2, EYE_E)
     a1, e1 = warp(a0, e0, P)
     d = direction(a1, e1)
-    r_face = radial_base(d, P) + features(a0, e0, P)
-    return STAR_CENTRE + (r_face + P["eye_protrusion"] - P["eyeball_r"])[:, None] * d
+    socket = STAR_CENTRE + (radial_base(d, P) + features(a0, e0, P))[:, None] * d
+    return socket + np.array([0.0, 0.0, P["eye_protrusion"] - P["eyeball_r"]])
 
 
 def _eyeball_radius(d, centres, r_ball):
-    """Near-side ray/eyeball intersection distance (...,), -inf where the ray misses both."""
+    """Distance (...,) along rays d from O to the front of the nearer eyeball it crosses (the far
+    ray/sphere intersection: O is inside the head, behind the eyes), -inf where a ray misses both."""
     out = np.full(d.shape[:-1], -np.inf)
     for c in centres:
         oc = c - STAR_CENTRE
         b = d @ oc
         disc = b * b - (oc @ oc - r_ball ** 2)
-        hit = disc > 0
-        t = np.where(hit, b - np.sqrt(np.maximum(disc, 0.0)), -np.inf)
+        t = np.where(disc > 0, b + np.sqrt(np.maximum(disc, 0.0)), -np.inf)
         out = np.maximum(out, t)
     return out
 
 
+def lid_region(a, e):
+    """Smooth indicator (...,) in [0, 1] of the eyelids' extent around either eye opening: an
+    ellipse in template angles reaching about 5 mm beyond the lid margins."""
+    a_side = np.abs(a)
+    q = ((a_side - EYE_A) / (EYE_HALF_W + 0.05)) ** 2 + ((e - eye_centre_line(a_side)) / (EYE_HALF_H + 0.06)) ** 2
+    return 1.0 / (1.0 + np.exp(np.minimum((q - 1.0) / 0.35, 50.0)))
+
+
 def radius(a, e, d, P, centres):
-    """Final radius (...,) cm: base + features, smoothly maxed with the eyeballs under the lids."""
+    """Final radius (...,) cm: base + features, smoothly maxed with the eyeballs under the lids.
+
+    Inside the lid region the eyeball front (plus the lid thickness outside the opening) pokes
+    out of the socket; outside it the eyeball is sunk 1 cm under the face, so it never shows.
+    """
     r_face = radial_base(d, P) + features(a, e, P)
-    r_eye = _eyeball_radius(d, centres, P["eyeball_r"]) + P["lid_thickness"] * (1.0 - eye_open_mask(a, e))
+    r_eye = (_eyeball_radius(d, centres, P["eyeball_r"])
+             + P["lid_thickness"] * (1.0 - eye_open_mask(a, e)) - 1.0 * (1.0 - lid_region(a, e)))
     r_eye = np.where(np.isfinite(r_eye), r_eye, r_face - 10.0)
     return np.maximum(smax(r_face, r_eye, 12.0), 1.0)
 
@@ -328,7 +369,8 @@ class SurfaceSample:
     Attributes: uv (V,2); a, e (V,) template angles (rad); points (V,3) cm; normals (V,3) unit,
     outward (by central differences in uv, so they depend only on uv and z_ID); smooth_normals (V,3):
     normals of the feature-free base head (stable directions for inflation); P (dict of head
-    parameters); eyeball_centres (2,3) cm; identity (J,).
+    parameters); eyeball_centres (2,3) cm; identity (J,); cache (dict): per-sample quantities that
+    several expression operators share (e.g. the eyelid frame), filled lazily by them.
     """
 
     def __init__(self, uv, identity, fd_step=2e-4):
@@ -339,7 +381,9 @@ class SurfaceSample:
         self.a, self.e = uv_to_template(self.uv)
         self.points = self.at_template(self.a, self.e)
         self.normals = _uv_normals(self.at_uv, self.uv, fd_step)
-        self.smooth_normals = _uv_normals(lambda q: _base_surface(*uv_to_template(q), self.P), self.uv, fd_step)
+        self.smooth_normals = _uv_normals(lambda q: _base_surface(*uv_to_template(q), self.P),
+                                          self.uv, fd_step)
+        self.cache = {}
 
     def at_uv(self, uv):
         """Points (...,3) of this identity at other disc coordinates."""

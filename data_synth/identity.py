@@ -24,7 +24,7 @@ BASE_PARAMS = {
     # eyes (cm)
     "eyeball_r": 1.2, "eye_protrusion": 0.35, "lid_thickness": 0.12, "socket_depth": 1.0,
     # features (cm heights, rad positions and widths)
-    "brow_h": 0.45, "brow_e": 0.6, "forehead_h": 0.0,
+    "brow_h": 0.45, "brow_e": 0.6, "forehead_h": 1.0,
     "cheekbone_h": 0.45, "cheekbone_e": 0.12, "cheek_h": 0.3, "temple_depth": 0.35,
     "chin_h": 1.3, "chin_w": 0.2, "chin_e": -0.74, "jaw_angle_h": 0.2, "fold_depth": 0.1,
     "ear_h": 1.2, "ear_e": 0.4, "ear_size": 0.15,

@@ -1,8 +1,13 @@
 """Tessellations of the (u, v) domain: regular, jittered and adaptive triangle meshes of the head.
 
-Points are laid out in a *sampling space* s (the unit disc) and triangulated there; a conformal map
-takes s to the (u, v) disc: the identity for "regular"/"jittered", a Moebius automorphism of the disc
-that concentrates points on the face for "adaptive" (conformal maps keep triangle shapes).
+Points are laid out in a *sampling space* s (the unit disc) and triangulated there; a map takes s
+to the (u, v) disc: the identity for "regular"/"jittered"; for "adaptive" a polar warp
+(rho, alpha) -> (R(rho), alpha - g(rho) sin(alpha)) where R' = 1 - k (bump at the face ring) +
+k r (bump at the crown cap) compresses the ring of the face radially and g the front (alpha ~ 0)
+azimuthally: up to (1-k)^-1 (1-g)^-1 = 4x denser at the face centre (the face gets about 1.5x the
+vertices of a regular tessellation of the same size), sparser on the back of the head and the
+crown. It is a diffeomorphism (triangular, R' > 0 and 1 - g cos(alpha) > 0); g fades to 0 at the
+crown and at the neck cut, where R' is 1, so triangles stay near-isotropic there.
 Hole boundaries (eye openings, mouth slit) and the face-crop boundary are sampled as vertex loops;
 Delaunay triangles inside holes or outside the region are dropped, and boundary segments missing
 from the triangulation are split until every boundary is a loop of mesh edges (conforming Delaunay).
@@ -14,13 +19,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import Delaunay, cKDTree
+from scipy.special import erf
 
 from . import head
 from .identity import mean_identity
 
 KINDS = ("regular", "jittered", "adaptive")
 REGIONS = ("full", "face")
-ADAPTIVE_CENTRE = 0.4j          # Moebius centre (complex u + i v): the face is at v > 0
+ADAPTIVE_RADIAL_GAIN, ADAPTIVE_AZIMUTH_GAIN = 0.5, 0.5   # k and g of the adaptive warp
+FACE_RING, CROWN_CAP = (0.55, 0.17), (0.12, 0.1)         # (centre, width) in rho
 FACE_A_MAX = 1.25               # face crop: |a| < FACE_A_MAX, FACE_E_MIN < e < FACE_E_MAX (rad)
 FACE_E_MIN, FACE_E_MAX = -1.0, 0.95
 MIN_LOOP_POINTS = {"eye": 16, "mouth": 24}
@@ -39,31 +46,58 @@ class Tessellation:
         return len(self.uv)
 
 
-def _to_complex(p):
-    return p[..., 0] + 1j * p[..., 1]
+def _bump_integral(rho, centre, width):
+    """Integral from 0 to rho of exp(-((x - centre) / width)^2)."""
+    return 0.5 * np.sqrt(np.pi) * width * (erf((rho - centre) / width) - erf(-centre / width))
 
 
-def _to_real(z):
-    return np.stack([z.real, z.imag], axis=-1)
+def _radial(rho):
+    """rho -> rho - k (B(rho) - r C(rho)): compress the face ring, expand the crown cap.
+
+    B, C: integrals of Gaussian bumps at FACE_RING and CROWN_CAP; r makes _radial(1) = 1."""
+    face = _bump_integral(rho, *FACE_RING)
+    crown = _bump_integral(rho, *CROWN_CAP)
+    r = _bump_integral(1.0, *FACE_RING) / _bump_integral(1.0, *CROWN_CAP)
+    return rho - ADAPTIVE_RADIAL_GAIN * (face - r * crown)
 
 
-def _moebius(z, w):
-    """Disc automorphism z -> (z + w) / (1 + conj(w) z)."""
-    return (z + w) / (1.0 + np.conj(w) * z)
+def _azimuth_gain(rho):
+    """g(rho): full between the crown cap and the neck, fading to 0 at both (smoothstep ramps)."""
+    up = np.clip(rho / 0.35, 0.0, 1.0)
+    down = np.clip((1.0 - rho) / 0.25, 0.0, 1.0)
+    return ADAPTIVE_AZIMUTH_GAIN * up * up * (3.0 - 2.0 * up) * down * down * (3.0 - 2.0 * down)
 
 
 def sampling_to_uv(s, kind):
     """(n,2) sampling-space points -> (n,2) disc coordinates."""
+    s = np.asarray(s, dtype=np.float64)
     if kind != "adaptive":
-        return np.asarray(s, dtype=np.float64)
-    return _to_real(_moebius(_to_complex(s), ADAPTIVE_CENTRE))
+        return s
+    rho = np.hypot(s[..., 0], s[..., 1])
+    alpha = np.arctan2(s[..., 0], s[..., 1])
+    rho2 = _radial(rho)
+    alpha2 = alpha - _azimuth_gain(rho) * np.sin(alpha)
+    return np.stack([rho2 * np.sin(alpha2), rho2 * np.cos(alpha2)], -1)
 
 
 def uv_to_sampling(uv, kind):
-    """Inverse of `sampling_to_uv`."""
+    """Inverse of `sampling_to_uv` (bisection in rho, Newton in alpha)."""
+    uv = np.asarray(uv, dtype=np.float64)
     if kind != "adaptive":
-        return np.asarray(uv, dtype=np.float64)
-    return _to_real(_moebius(_to_complex(uv), -ADAPTIVE_CENTRE))
+        return uv
+    target = np.hypot(uv[..., 0], uv[..., 1])
+    alpha2 = np.arctan2(uv[..., 0], uv[..., 1])
+    lo, hi = np.zeros_like(target), np.ones_like(target)
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        low = _radial(mid) < target
+        lo, hi = np.where(low, mid, lo), np.where(low, hi, mid)
+    rho = 0.5 * (lo + hi)
+    g = _azimuth_gain(rho)
+    alpha = alpha2.copy()
+    for _ in range(12):
+        alpha -= (alpha - g * np.sin(alpha) - alpha2) / (1.0 - g * np.cos(alpha))
+    return np.stack([rho * np.sin(alpha), rho * np.cos(alpha)], -1)
 
 
 def inside_region(uv, region, holes):
@@ -245,7 +279,8 @@ def tessellate(n_vertices=5000, kind="regular", region="full", holes=True, seed=
     """Triangulate the (u, v) domain with about `n_vertices` vertices (within ~10 %).
 
     kind: "regular" (triangular lattice), "jittered" (lattice moved by up to 0.3 spacing, seeded),
-    "adaptive" (lattice through a Moebius map: ~3-4x denser on the face than on the back).
+    "adaptive" (lattice through the adaptive warp: the face gets ~1.5x the vertices it gets from
+    "regular" at the same n_vertices).
     region: "full" head or "face" crop; holes: cut the eye openings and the mouth slit.
     Returns Tessellation(uv (V,2) float64, faces (F,3) int64, name).
     """

@@ -183,12 +183,13 @@ def validate(model: NFSModel, val_set, device) -> dict[str, float]:
             "val_weight_mae": float(np.mean(mae))}
 
 
-def learning_rate(step: int, total: int, optim_cfg: dict) -> float:
-    """Linear warm-up then cosine decay to 5 % of the base rate."""
+def learning_rate(progress: float, step: int, optim_cfg: dict) -> float:
+    """Linear warm-up over ``warmup_steps``, then cosine decay to 5 % of the base rate as
+    ``progress`` (fraction of the run done, 0..1) goes to 1."""
     base, warm = optim_cfg["lr"], max(1, optim_cfg["warmup_steps"])
     if step < warm:
         return base * (step + 1) / warm
-    t = min(1.0, (step - warm) / max(1, total - warm))
+    t = min(1.0, max(0.0, progress))
     return base * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * t)))
 
 
@@ -283,7 +284,7 @@ class Trainer:
                 if tcfg["max_minutes"] and self.elapsed >= 60 * tcfg["max_minutes"]:
                     break
                 t0 = time.monotonic()
-                lr = learning_rate(self.step, total_steps, self.cfg["optim"])
+                lr = learning_rate(self.run_fraction(), self.step, self.cfg["optim"])
                 for g in self.opt.param_groups:
                     g["lr"] = lr
                 group = self.pool.sample(self.step, self.rank)
@@ -324,6 +325,16 @@ class Trainer:
         self.save()
         self.export(self.out / "model.pt")
         return metrics
+
+    def run_fraction(self) -> float:
+        """Fraction of the run done: by steps, or by training time when ``max_minutes`` is set and
+        comes first (then the schedule follows the clock, and a resumed run continues it from the
+        saved elapsed time rather than bit for bit)."""
+        tcfg = self.cfg["train"]
+        done = self.step / max(1, tcfg["steps"])
+        if tcfg["max_minutes"]:
+            done = max(done, self.elapsed / (60.0 * tcfg["max_minutes"]))
+        return done
 
     def _request_stop(self, signum, frame):
         """Ctrl-C: finish the current step, save, exit cleanly."""

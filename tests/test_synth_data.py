@@ -64,9 +64,10 @@ def test_smooth_sequence_is_smooth_and_bounded():
 def test_shards_round_trip(tmp_path):
     cfg = load_config("configs/synth/tiny.yaml")
     items = list(generate_items(cfg))
-    paths = write_shards(tmp_path / "ds", iter(items), cfg["shard_size"])
+    paths = write_shards(tmp_path / "ds", iter(items), cfg["shard_size"], config=cfg)
     assert len(paths) == 2 and not list((tmp_path / "ds").glob("*.tmp"))
     reader = ShardReader(tmp_path / "ds")
+    assert reader.config == cfg
     assert len(reader) == cfg["n_identities"]
     for item, back in zip(items, reader):
         assert set(back) == set(item)

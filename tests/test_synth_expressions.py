@@ -6,7 +6,8 @@ import pytest
 
 from data_synth import FACS_NAMES, head
 from data_synth.expressions import expression_deltas
-from data_synth.identity import ASYMMETRIC_MODES, IDENTITY_MODES, mean_identity, mirror_identity, sample_identity
+from data_synth.identity import (ASYMMETRIC_MODES, IDENTITY_MODES, mean_identity, mirror_identity,
+                                 sample_identity)
 from data_synth.rig import build_rig
 from data_synth.segmentation import SEGMENT_NAMES, segment_labels
 from data_synth.tessellate import tessellate
@@ -21,15 +22,16 @@ EXPECTED = {
     "cheekSquint": "cheek lower_eyelid", "eyeBlink": "upper_eyelid lower_eyelid",
     "eyeLookDown": "upper_eyelid lower_eyelid", "eyeLookIn": "upper_eyelid lower_eyelid",
     "eyeLookOut": "upper_eyelid lower_eyelid", "eyeLookUp": "upper_eyelid lower_eyelid",
-    "eyeSquint": "upper_eyelid lower_eyelid", "eyeWide": "upper_eyelid lower_eyelid",
+    "eyeSquint": "upper_eyelid lower_eyelid cheek", "eyeWide": "upper_eyelid lower_eyelid",
     "jawForward": "chin jaw lower_lip neck", "jawLeft": "chin jaw lower_lip neck",
     "jawOpen": "chin jaw lower_lip neck", "mouthClose": "lower_lip chin mouth_corner",
-    "mouthDimple": "mouth_corner cheek", "mouthFrown": "mouth_corner jaw chin lower_lip",
-    "mouthFunnel": "upper_lip lower_lip mouth_corner chin", "mouthLeft": "upper_lip lower_lip mouth_corner chin",
+    "mouthDimple": "mouth_corner cheek upper_lip lower_lip", "mouthFrown": "mouth_corner jaw chin lower_lip",
+    "mouthFunnel": "upper_lip lower_lip mouth_corner chin",
+    "mouthLeft": "upper_lip lower_lip mouth_corner chin",
     "mouthLowerDown": "lower_lip chin", "mouthPress": "upper_lip lower_lip mouth_corner",
     "mouthPucker": "upper_lip lower_lip mouth_corner", "mouthRollLower": "lower_lip chin",
     "mouthRollUpper": "upper_lip", "mouthShrugLower": "chin lower_lip", "mouthShrugUpper": "upper_lip",
-    "mouthSmile": "mouth_corner cheek upper_lip lower_lip", "mouthStretch": "mouth_corner lower_lip",
+    "mouthSmile": "mouth_corner cheek upper_lip lower_lip", "mouthStretch": "mouth_corner lower_lip chin jaw",
     "mouthUpperUp": "upper_lip mouth_corner", "noseSneer": "nose_tip nose_bridge cheek",
 }
 
@@ -158,3 +160,5 @@ def test_rig_evaluate_and_speed():
     assert rig.evaluate(np.zeros((4, 53))).shape == (4, len(tess.uv), 3)
     with pytest.raises(ValueError, match="weights"):
         rig.evaluate(np.zeros(52))
+    with pytest.raises(ValueError, match="mouthSmileLeft"):
+        expression_deltas(tess.uv[:5], z, names=("mouthSmileLeft",))

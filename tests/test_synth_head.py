@@ -7,6 +7,13 @@ from data_synth.identity import (ASYMMETRIC_MODES, IDENTITY_MODES, N_IDENTITY, h
                                  mean_identity, mirror_identity, sample_identity)
 
 
+def _disc(n=161):
+    """uv points (m,2) of an n x n grid inside the unit disc."""
+    u, v = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n))
+    uv = np.stack([u.ravel(), v.ravel()], -1)
+    return uv[np.hypot(uv[:, 0], uv[:, 1]) <= 1.0]
+
+
 def _grid(n=60):
     a, e = np.meshgrid(np.linspace(-1.4, 1.4, n), np.linspace(-1.15, 1.0, n))
     return a.ravel(), e.ravel()
@@ -36,9 +43,7 @@ def test_chart_round_trip():
 
 
 def test_mean_head_proportions():
-    u, v = np.meshgrid(np.linspace(-1, 1, 161), np.linspace(-1, 1, 161))
-    uv = np.stack([u.ravel(), v.ravel()], -1)
-    uv = uv[np.hypot(uv[:, 0], uv[:, 1]) <= 1.0]
+    uv = _disc()
     p = head.surface(uv, mean_identity())
     a, _ = head.uv_to_template(uv)
     no_ears = np.abs(np.abs(a) - 1.56) > 0.3
@@ -93,3 +98,13 @@ def test_mirror_identity_mirrors_the_head():
     q = head.surface(uv * [-1, 1], mirror_identity(z))
     assert np.allclose(p * [-1, 1, 1], q, atol=1e-9)
     assert not np.allclose(p * [-1, 1, 1], head.surface(uv * [-1, 1], z), atol=1e-3)
+
+
+def test_every_identity_mode_changes_the_head():
+    uv = _disc(81)
+    base = head.surface(uv, mean_identity())
+    for j, name in enumerate(IDENTITY_MODES):
+        z = np.zeros(N_IDENTITY)
+        z[j] = 1.0
+        moved = np.linalg.norm(head.surface(uv, z) - base, axis=1).max()
+        assert 0.03 < moved < 3.0, (name, moved)

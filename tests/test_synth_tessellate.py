@@ -79,8 +79,10 @@ def test_hole_boundaries_follow_the_openings():
 def test_adaptive_is_denser_on_the_face_and_seeds_matter():
     reg = tessellate(3000, kind="regular")
     ada = tessellate(3000, kind="adaptive")
-    face = lambda t: np.sum(np.abs(head.uv_to_template(t.uv)[0]) < 0.6)  # noqa: E731
-    assert face(ada) > 1.8 * face(reg)
+    def face(t):
+        a, e = head.uv_to_template(t.uv)
+        return np.sum((np.abs(a) < 0.8) & (np.abs(e) < 0.8))
+    assert face(ada) > 1.4 * face(reg)
     j0, j1 = tessellate(800, kind="jittered", seed=0), tessellate(800, kind="jittered", seed=1)
     assert not np.array_equal(j0.uv[: min(len(j0.uv), len(j1.uv))], j1.uv[: min(len(j0.uv), len(j1.uv))])
     again = tessellate(800, kind="jittered", seed=0)
