@@ -226,3 +226,26 @@ def test_quad_obj_target_is_triangulated_and_keeps_its_vertices(files, tmp_path)
     out = load_mesh(tmp_path / "q" / "frame_0000.obj")
     assert out.vertices.shape == v.shape and len(out.faces) == 2 * len(quads)
     assert np.isfinite(out.vertices).all() and np.abs(out.vertices - v).max() > 1e-4
+
+
+def test_failed_sequence_leaves_no_partial_folder(tmp_path, monkeypatch):
+    import argparse
+
+    from retarget.commands import _common
+    from retarget.errors import RetargetError
+
+    calls = []
+
+    def failing_save(path, verts, faces):
+        calls.append(path)
+        if len(calls) == 3:
+            raise RetargetError(f"{path}: disk full")
+        Path(path).write_text("v 0 0 0\n")
+
+    monkeypatch.setattr(_common, "save_mesh", failing_save)
+    args = argparse.Namespace(up=None, forward=None, format="obj")
+    frames = np.zeros((5, 3, 3))
+    with pytest.raises(RetargetError, match="disk full"):
+        _common.write_frames(str(tmp_path / "out"), frames, np.array([[0, 1, 2]]), [], args)
+    assert not (tmp_path / "out").exists()
+    assert list(tmp_path.iterdir()) == []  # staging folder removed too

@@ -1,7 +1,10 @@
 """Options and file handling shared by the mesh commands (transfer, animate, invert, export-rig)."""
 from __future__ import annotations
 
+import os
+import shutil
 import sys
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -65,15 +68,32 @@ def output_paths(out: str, n_frames: int, inputs: list, fmt: str = "obj") -> lis
 def write_frames(out: str, frames: np.ndarray, faces: np.ndarray, inputs: list, args,
                  fps: float = 30.0) -> list[Path]:
     """Write (T,V,3) project-frame vertices in the input files' axes to OUT (see
-    :func:`output_paths`). Never overwrites an input; each file is written atomically."""
+    :func:`output_paths`). Never overwrites an input. Files are written atomically; the frames of a
+    folder are first written to a hidden staging folder beside it and moved in only when all of them
+    are written, so an error leaves no partial sequence behind."""
     frames = np.asarray(frames) @ rotation(args)  # back to the files' axes (R orthonormal)
     paths = output_paths(out, len(frames), inputs, getattr(args, "format", "obj"))
     if paths[0].suffix.lower() == ".glb":
         from ..glb import write_sequence_glb
         write_sequence_glb(paths[0], frames, faces, fps=fps)
         return paths
-    for p, f in zip(paths, frames):
-        save_mesh(p, f, faces)
+    if len(paths) == 1 and paths[0].parent != Path(out):
+        save_mesh(paths[0], frames[0], faces)
+        return paths
+    folder = Path(out)
+    try:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    except OSError as e:
+        raise RetargetError(f"{out}: cannot write the output folder ({e.strerror})") from None
+    try:
+        for p, f in zip(paths, frames):
+            save_mesh(staging / p.name, f, faces)
+        folder.mkdir(exist_ok=True)
+        for p in paths:
+            os.replace(staging / p.name, p)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
     return paths
 
 
