@@ -54,9 +54,25 @@ DEFAULTS = {
 
 
 # ------------------------------------------------------------------------------------- config
-def load_config(path) -> dict:
-    """Read a training YAML and fill in defaults. RetargetError names the file and the bad key."""
-    cfg = merge(DEFAULTS, read_yaml(path, "training config"), str(path), replace=("model",))
+def load_config(path, _seen=()) -> dict:
+    """Read a training YAML and fill in defaults. RetargetError names the file and the bad key.
+
+    A config may start from another one, ``base: default.yaml`` (relative to its own folder), and
+    change only what differs (the ablations do). ``model`` keys add to the base's model keys.
+    """
+    path = Path(path)
+    raw = read_yaml(path, "training config")
+    base = raw.pop("base", None)
+    if base is not None:
+        base_path = path.parent / str(base)
+        if base_path.resolve() in _seen:
+            raise RetargetError(f"{path}: base {base!r} includes itself")
+        defaults = load_config(base_path, _seen + (path.resolve(),))
+    else:
+        defaults = DEFAULTS
+    if isinstance(raw.get("model"), dict):
+        raw["model"] = {**defaults["model"], **raw["model"]}
+    cfg = merge(defaults, raw, str(path), replace=("model",))
     model_cfg(cfg, str(path))  # validates the model section
     return cfg
 

@@ -133,3 +133,20 @@ dist.destroy_process_group()
                          env=env, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.count(" ok") == 2
+
+
+def test_committed_configs_load_and_ablations_differ_from_default_only_where_named(tmp_path):
+    from retarget.train import model_cfg
+    configs = {p.stem: load_config(p) for p in (ROOT / "configs" / "train").glob("*.yaml")}
+    assert {"default", "tiny", "paper", "no_skinning", "no_bp", "no_br", "seg6", "seg14", "seg24"} <= set(configs)
+    default = configs["default"]
+    assert model_cfg(configs["no_skinning"]).use_skinning is False
+    assert configs["no_bp"]["loss"]["bp"] == 0.0 and configs["no_br"]["loss"]["br"] == 0.0
+    for n in (6, 14, 24):
+        assert model_cfg(configs[f"seg{n}"]).n_segments == n
+    for name in ("no_skinning", "no_bp", "no_br", "seg6", "seg14", "seg24"):
+        assert configs[name]["data"] == default["data"] and configs[name]["train"] == default["train"]
+    loop = tmp_path / "loop.yaml"
+    loop.write_text("base: loop.yaml\n")
+    with pytest.raises(RetargetError, match="includes itself"):
+        load_config(loop)
