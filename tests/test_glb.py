@@ -1,4 +1,7 @@
 """GLB rig export: structure, accessor bounds, morph data, animation, reload with pygltflib/trimesh."""
+import os
+from pathlib import Path
+
 import numpy as np
 import pygltflib
 import pytest
@@ -117,3 +120,35 @@ def test_bad_arguments_and_files(tmp_path, rig):
     with pytest.raises(RetargetError, match="g.glb: cannot read"):
         read_glb_morph_names(garbage)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "g.glb"]
+
+
+# ----------------------------------------------------------------------------------------------
+# The Khronos glTF validator (npm package gltf-validator), installed by `make test` into
+# build/gltf-validator when npm is present; the test is skipped where it is not.
+VALIDATOR_DIR = Path(os.environ.get("GLTF_VALIDATOR_DIR", Path(__file__).resolve().parents[1] / "build" / "gltf-validator"))
+
+
+def khronos_issues(path) -> dict:
+    import json
+    import shutil
+    import subprocess
+
+    if shutil.which("node") is None or not (VALIDATOR_DIR / "node_modules" / "gltf-validator").is_dir():
+        pytest.skip("Khronos glTF validator not installed (make test installs it with npm)")
+    script = Path(__file__).parent / "tools" / "gltf_validate.mjs"
+    res = subprocess.run(["node", str(script), str(path)], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "GLTF_VALIDATOR_DIR": str(VALIDATOR_DIR)})
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout)
+
+
+def test_rig_and_sequence_glb_pass_the_khronos_validator(tmp_path):
+    m = trimesh.creation.icosphere(2)
+    rng = np.random.default_rng(0)
+    deltas = rng.normal(size=(4, len(m.vertices), 3)).astype(np.float32) * 0.1
+    write_rig_glb(tmp_path / "rig.glb", m.vertices, m.faces, deltas, ["a", "b", "c", "d"],
+                  animation=rng.random((12, 4)), fps=24)
+    write_sequence_glb(tmp_path / "seq.glb", m.vertices[None] + deltas, m.faces, fps=30)
+    for name in ("rig.glb", "seq.glb"):
+        issues = khronos_issues(tmp_path / name)
+        assert issues["numErrors"] == 0, (name, issues["messages"])
