@@ -225,8 +225,9 @@ def vertex_normals(verts: np.ndarray, faces: np.ndarray | None) -> np.ndarray:
         faces = np.asarray(faces, dtype=np.int64)
         tri = verts[faces]
         face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 x area
-        for c in range(3):
-            np.add.at(normals, faces[:, c], face_n)
+        for k in range(3):  # bincount: far faster than np.add.at on large meshes
+            normals[:, k] = np.bincount(faces.ravel(), weights=np.repeat(face_n[:, k], 3),
+                                        minlength=len(verts))
     length = np.linalg.norm(normals, axis=1)
     missing = length <= 1e-12 * max(float(length.max(initial=0.0)), 1e-300)
     if missing.any():

@@ -12,24 +12,9 @@ from functools import cached_property
 
 import numpy as np
 
+from nets.geometry import vertex_normals  # noqa: F401  (one implementation, re-exported)
+
 from .errors import RetargetError
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals.
-
-    vertices (V,3) float, faces (F,3) int (counter-clockwise seen from outside) -> (V,3) float64.
-    Each face contributes its unnormalised normal (length = twice its area) to its three corners;
-    vertices touched by no face (or only by degenerate faces) get a zero normal.
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # (F,3), |n| = 2·area
-    out = np.zeros_like(v)
-    for k in range(3):
-        out[:, k] = np.bincount(f.ravel(), weights=np.repeat(face_n[:, k], 3), minlength=len(v))
-    norm = np.linalg.norm(out, axis=1, keepdims=True)
-    return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
 
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
