@@ -33,7 +33,7 @@ from .errors import RetargetError
 from .metrics import CM_TO_MM, segment_mse_mm2
 from .prepare import IMAGE_CHANNELS, vertex_features
 from .render import render_frontal
-from .training_data import Group, TargetPool, validation_entries
+from .training_data import Group, make_pool, validation_entries
 
 DEFAULTS = {
     "model": {"preset": "cpu"},
@@ -44,6 +44,7 @@ DEFAULTS = {
         "weights": "mixed", "sources_per_target": 4, "decode_faces": 1000,
         "augment": {"rotate_deg": 3.0, "scale": 0.05, "translate": 0.5},
         "val_identities": 4, "val_expressions": 4,
+        "rig": None, "keep_vertices": None, "rig_mix": 0.5,
     },
     "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,
              "bp": 1.0, "br": 1.0, "nll": 1.0},
@@ -130,9 +131,17 @@ def face_subset(faces: np.ndarray, n_faces: int, rng: np.random.Generator):
     return rows, inverse.reshape(-1, 3)
 
 
+#: The encoder and segmentation terms added to L_dec, in this order, with their config weights.
+LOSS_WEIGHTS = (("L_ID", "id"), ("L_Exp", "exp"), ("L_BP", "bp"), ("L_BR", "br"), ("L_nll", "nll"))
+
+
 def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
                  rng: np.random.Generator, device) -> dict[str, torch.Tensor]:
-    """All NFS losses (eq. 2-9) of one training group; returns named scalars and ``total``."""
+    """All NFS losses (eq. 2-9) of one training group; returns named scalars and ``total``.
+
+    On a user rig (``training_data.RigPool``) L_ID is left out when the target has no identity
+    coefficients, L_nll when it has no segment labels, and L_Exp / L_BR supervise only the shapes
+    the rig has (``Entry.present``)."""
     tgt = group.target
     t_feat, t_img, t_ops = tgt.mesh.torch_inputs(device)
     images = torch.from_numpy(np.stack([tgt.mesh.image] + [s.image for s in group.sources]))
@@ -144,6 +153,13 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
                                 s.entry.mesh.ops.to_torch(device))
         for i, s in enumerate(group.sources)])
     weights = torch.from_numpy(np.stack([s.weights for s in group.sources])).to(device)
+    z_exp, w_exp, z_br = z_ge, weights, z_ge
+    if tgt.present is not None and not tgt.present.all():
+        # a user rig lacking shapes: L_Exp leaves their z_GE dims free and L_BR decodes them as
+        # zero (L_BP ignores them already: their basis rows are zero)
+        present = torch.from_numpy(tgt.present).to(device)                           # (53,)
+        keep = torch.cat([present, present.new_ones(z_ge.shape[1] - len(present))])  # (128,)
+        z_exp, w_exp, z_br = z_ge[:, keep], weights[:, present], z_ge * keep
 
     rows_np, sub_faces_np = face_subset(tgt.mesh.faces, n_faces, rng)
     rows = torch.from_numpy(rows_np).to(device)
@@ -153,20 +169,22 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
     gt = torch.from_numpy(group.gt_dv).to(device)[:, rows]
     out = L.decoder_loss(rest + dv, rest + gt, rest, sub_faces, loss_cfg["lambda_v"],
                          loss_cfg["lambda_n"], loss_cfg["lambda_g"])
-    identity_gt = torch.from_numpy(tgt.rig.identity.astype(np.float32)).to(device)
-    out["L_ID"] = L.identity_loss(codes.z_id, identity_gt)
-    out["L_Exp"] = L.expression_loss(z_ge, weights)
+    if tgt.rig.identity is not None:  # a user rig has no procedural identity coefficients
+        identity_gt = torch.from_numpy(tgt.rig.identity.astype(np.float32)).to(device)
+        out["L_ID"] = L.identity_loss(codes.z_id, identity_gt)
+    out["L_Exp"] = L.expression_loss(z_exp, w_exp)
     out["L_BP"] = torch.stack([
         L.blendshape_projection_loss(g, w, torch.from_numpy(s.entry.basis).to(device))
         for g, w, s in zip(z_ge, weights, group.sources)]).mean()
     basis_t = torch.from_numpy(tgt.basis).to(device)
-    out["L_BR"] = L.blendshape_reconstruction_loss(model, t_feat, c_t, codes, z_ge, basis_t, rows)
-    total = (out["L_dec"] + loss_cfg["id"] * out["L_ID"] + loss_cfg["exp"] * out["L_Exp"]
-             + loss_cfg["bp"] * out["L_BP"] + loss_cfg["br"] * out["L_BR"])
-    if codes.z_skin is not None:
+    out["L_BR"] = L.blendshape_reconstruction_loss(model, t_feat, c_t, codes, z_br, basis_t, rows)
+    if codes.z_skin is not None and tgt.rig.segments is not None:
         labels = torch.from_numpy(tgt.rig.segments).to(device)
         out["L_nll"] = L.segmentation_nll(codes.z_skin, labels)
-        total = total + loss_cfg["nll"] * out["L_nll"]
+    total = out["L_dec"]
+    for term, weight in LOSS_WEIGHTS:
+        if term in out:
+            total = total + loss_cfg[weight] * out[term]
     out["total"] = total
     return out
 
@@ -226,13 +244,18 @@ class Trainer:
         torch.manual_seed(seed)
         self.model = NFSModel(self.model_cfg).to(self.device)
         if init is not None:
-            self.model.load_state_dict(model_from_checkpoint(load_checkpoint(init), init).state_dict())
+            initial = model_from_checkpoint(load_checkpoint(init), init)
+            if initial.cfg != self.model_cfg:
+                raise RetargetError(f"{init}: the checkpoint's model does not match the config's "
+                                    f"(model: {cfg['model']}); leave --config out to fine-tune "
+                                    f"with the checkpoint's own model")
+            self.model.load_state_dict(initial.state_dict())
         if self.world > 1:
             for p in self.model.parameters():
                 dist.broadcast(p.data, 0)
         self.opt = torch.optim.AdamW(self.model.parameters(), lr=cfg["optim"]["lr"],
                                      weight_decay=cfg["optim"]["weight_decay"])
-        self.pool = TargetPool(cfg["data"], self.model_cfg, seed)
+        self.pool = make_pool(cfg["data"], self.model_cfg, seed)
         self.step, self.elapsed = 0, 0.0
         self.config_path = config_path
         self.progress = progress and self.rank == 0

@@ -12,6 +12,9 @@ have seen, without saving any sampler state.
 A sample (``Group``) is one target neutral and S sources with expressions, whose ground truth is the
 target's rig driven by the sources' weights — exact for self-, cross-identity and cross-topology
 pairs because every procedural tessellation samples the same (u, v) surface.
+
+Fine-tuning on the user's own rig (``data.rig``, ``retarget train --rig``) uses ``RigPool``: the
+same groups drawn from that rig (self-retargeting only), mixed with procedural ones.
 """
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ from data_synth.rig import Rig, build_rig
 from data_synth.sampling import sample_weights
 from data_synth.tessellate import tessellate
 
+from .errors import RetargetError
 from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh
 
 PAIR_KINDS = ("self", "cross_topology", "cross_identity")
@@ -33,13 +37,15 @@ PAIR_KINDS = ("self", "cross_topology", "cross_identity")
 class Entry:
     """One identity on one tessellation, prepared for the network.
 
-    rig: the procedural rig (cm). mesh: its neutral prepared in the canonical frame.
-    basis: (53,V,3) float32 blendshape deltas in canonical units (rig.deltas · canon.scale).
+    rig: the procedural rig (cm), or a ``user_rig.UserRig``. mesh: its neutral prepared in the
+    canonical frame. basis: (53,V,3) float32 blendshape deltas in canonical units
+    (rig.deltas · canon.scale). present: (53,) bool, the shapes the rig has (None = all 53).
     """
 
     rig: Rig
     mesh: PreparedMesh
     basis: np.ndarray
+    present: np.ndarray | None = None
 
 
 @dataclass
@@ -139,25 +145,76 @@ class TargetPool:
             else:
                 other = (t_slot + 1 + int(rng.integers(size - 1))) % size if size > 1 else t_slot
                 entry = self.slot(other, step)[int(rng.integers(2))]
-            sources.append(self.make_source(entry, w, kind, rng))
-        gt = np.einsum("sk,kvc->svc", weights, target.basis).astype(np.float32)
-        return Group(target, sources, gt)
+            sources.append(make_source(entry, w, kind, rng, self.cfg.get("augment", {}),
+                                       self.model_cfg))
+        return Group(target, sources, ground_truth(weights, target))
 
-    def make_source(self, entry: Entry, weights: np.ndarray, kind: str,
-                    rng: np.random.Generator) -> Source:
-        """The rig of ``entry`` driven by ``weights``, augmented by a small rotation, scale and
-        translation, then canonicalised on its own (as at inference, where no neutral is given)."""
-        aug = self.cfg.get("augment", {})
-        frame = entry.rig.evaluate(weights).astype(np.float64)
-        rot = random_rotation(rng, aug.get("rotate_deg", 0.0))
-        scale = np.exp(rng.uniform(-1, 1) * aug.get("scale", 0.0))
-        shift = rng.normal(size=3) * aug.get("translate", 0.0)
-        frame = (frame @ rot.T) * scale + shift
-        prepared = prepare_mesh(frame, entry.rig.faces, self.model_cfg.k_eig,
-                                self.model_cfg.image_size,
-                                IMAGE_CHANNELS[self.model_cfg.image_channels],
-                                ops=entry.mesh.ops)
-        return Source(entry, prepared.feat, prepared.image, weights, kind)
+
+def ground_truth(weights: np.ndarray, target: Entry) -> np.ndarray:
+    """Canonical target displacements w·B_tgt: weights (S,53) -> (S,V,3) float32."""
+    return np.einsum("sk,kvc->svc", weights, target.basis).astype(np.float32)
+
+
+def make_source(entry: Entry, weights: np.ndarray, kind: str, rng: np.random.Generator,
+                augment: dict, model_cfg) -> Source:
+    """The rig of ``entry`` driven by ``weights`` (53,), augmented by a small rotation
+    (``augment["rotate_deg"]``), scale (log-uniform ±``scale``) and translation (normal,
+    ``translate`` in the rig's units), then canonicalised on its own (as at inference, where no
+    neutral is given)."""
+    frame = entry.rig.evaluate(weights).astype(np.float64)
+    rot = random_rotation(rng, augment.get("rotate_deg", 0.0))
+    scale = np.exp(rng.uniform(-1, 1) * augment.get("scale", 0.0))
+    shift = rng.normal(size=3) * augment.get("translate", 0.0)
+    frame = (frame @ rot.T) * scale + shift
+    prepared = prepare_mesh(frame, entry.rig.faces, model_cfg.k_eig, model_cfg.image_size,
+                            IMAGE_CHANNELS[model_cfg.image_channels], ops=entry.mesh.ops)
+    return Source(entry, prepared.feat, prepared.image, weights, kind)
+
+
+class RigPool:
+    """Self-retargeting groups on the user's own rig (``data.rig``), mixed with procedural groups.
+
+    With probability ``data.rig_mix`` a step's group is drawn from the rig: its neutral as the
+    target and ``sources_per_target`` sources, the rig driven by weights sampled as for procedural
+    rigs (``data.weights``) and zeroed on the shapes the rig lacks, augmented like procedural
+    sources. Otherwise the step takes the procedural ``TargetPool`` group, so the model does not
+    forget. Deterministic from (seed, step, rank), like ``TargetPool``: resuming is exact.
+    """
+
+    def __init__(self, data_cfg: dict, model_cfg, seed: int):
+        from .user_rig import load_user_rig
+
+        self.cfg, self.model_cfg, self.seed = data_cfg, model_cfg, int(seed)
+        self.mix = float(data_cfg["rig_mix"])
+        if not 0.0 <= self.mix <= 1.0:
+            raise RetargetError(f"data.rig_mix must be in [0, 1], got {self.mix}")
+        rig = load_user_rig(data_cfg["rig"], data_cfg["keep_vertices"])
+        if rig.segments is not None and rig.segments.max() >= model_cfg.n_segments:
+            raise RetargetError(f"{rig.name}: segment labels reach {int(rig.segments.max())}, but the "
+                                f"model has {model_cfg.n_segments} segments")
+        mesh = prepare_mesh(rig.neutral, rig.faces, model_cfg.k_eig, model_cfg.image_size,
+                            IMAGE_CHANNELS[model_cfg.image_channels])
+        self.entry = Entry(rig, mesh, (rig.deltas * mesh.canon.scale).astype(np.float32),
+                           rig.present)
+        self.procedural = TargetPool(data_cfg, model_cfg, seed) if self.mix < 1.0 else None
+
+    def sample(self, step: int, rank: int = 0) -> Group:
+        """The training group of ``step`` on process ``rank``: from the rig or procedural."""
+        rng = np.random.default_rng([self.seed, step, rank, 2])
+        if self.procedural is not None and rng.random() >= self.mix:
+            return self.procedural.sample(step, rank)
+        weights = sample_weights(rng, self.cfg["sources_per_target"], mode=self.cfg["weights"])
+        weights = (weights * self.entry.present).astype(np.float32)
+        sources = [make_source(self.entry, w, "self", rng, self.cfg.get("augment", {}),
+                               self.model_cfg) for w in weights]
+        return Group(self.entry, sources, ground_truth(weights, self.entry))
+
+
+def make_pool(data_cfg: dict, model_cfg, seed: int):
+    """The trainer's sampler: ``RigPool`` when ``data.rig`` names a rig, else ``TargetPool``."""
+    if data_cfg.get("rig"):
+        return RigPool(data_cfg, model_cfg, seed)
+    return TargetPool(data_cfg, model_cfg, seed)
 
 
 def validation_entries(data_cfg: dict, model_cfg, seed: int) -> list[tuple[Entry, np.ndarray]]:

@@ -1,4 +1,5 @@
-"""``retarget train``: train the NFS network on procedural rigs from a YAML config."""
+"""``retarget train``: train the NFS network on procedural rigs from a YAML config, or fine-tune a
+checkpoint on the user's own blendshape rig (``--rig``)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,30 +7,69 @@ from pathlib import Path
 HELP = "train the network from a config (resumable; torchrun for several processes)"
 EXAMPLE = """retarget train --config configs/train/default.yaml --out runs/default
 retarget train --config configs/train/default.yaml --out runs/default --resume
-torchrun --nproc_per_node 2 -m retarget.cli train --config configs/train/tiny.yaml --out runs/ddp"""
+torchrun --nproc_per_node 2 -m retarget.cli train --config configs/train/tiny.yaml --out runs/ddp
+retarget train --rig my_rig.npz --init runs/default/model.pt --out runs/mine    # fine-tune
+retarget train --rig ICT-FaceKit/FaceXModel --keep-vertices 0:11248 --init model.pt --out runs/ict"""
+
+#: The fine-tuning config used with --rig when --config is left out (model from --init).
+FINETUNE_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "train" / "finetune.yaml"
 
 
 def add_arguments(p):
-    p.add_argument("--config", required=True, help="training YAML (configs/train/*.yaml)")
+    p.add_argument("--config", help="training YAML (configs/train/*.yaml); with --rig it defaults to "
+                                    "configs/train/finetune.yaml and the --init checkpoint's model")
     p.add_argument("--out", required=True, help="run folder: last.pt, model.pt, train_log.csv")
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt if present")
     p.add_argument("--init", help="initialise the weights from this checkpoint (fine-tuning)")
+    p.add_argument("--rig", help="fine-tune on this blendshape rig: an npz (neutral, faces, names, "
+                                 "deltas) or a folder (neutral.obj + one OBJ per ICT/ARKit shape, "
+                                 "or ICT-FaceKit's FaceXModel)")
+    p.add_argument("--keep-vertices", metavar="A:B",
+                   help="use only the rig's vertices A..B-1 (e.g. the skin, without eyes and teeth)")
+    p.add_argument("--rig-mix", type=float,
+                   help="fraction of steps drawn from the rig, the rest procedural (default 0.5)")
     p.add_argument("--steps", type=int, help="override train.steps")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def run(args) -> int:
-    from ..train import Trainer, load_config
+def training_config(args) -> tuple[dict, str]:
+    """(config, its path) from the arguments: --config, or with --rig the fine-tuning config whose
+    model is the --init checkpoint's; --rig, --keep-vertices, --rig-mix and --steps applied."""
+    from ..errors import RetargetError
+    from ..train import load_checkpoint, load_config
 
-    cfg = load_config(args.config)
+    if args.config is None:
+        if not args.rig:
+            raise RetargetError("--config is required (or --rig with --init to fine-tune)")
+        if not args.init:
+            raise RetargetError("--rig without --config needs --init CHECKPOINT (its model is "
+                                "fine-tuned)")
+        cfg = load_config(FINETUNE_CONFIG)
+        cfg["model"] = dict(load_checkpoint(args.init)["model_config"])
+        path = str(FINETUNE_CONFIG)
+    else:
+        cfg, path = load_config(args.config), args.config
+    if args.rig:
+        cfg["data"]["rig"] = args.rig
+    if args.keep_vertices is not None:
+        cfg["data"]["keep_vertices"] = args.keep_vertices
+    if args.rig_mix is not None:
+        cfg["data"]["rig_mix"] = args.rig_mix
     if args.steps is not None:
         cfg["train"]["steps"] = args.steps
+    return cfg, path
+
+
+def run(args) -> int:
+    from ..errors import RetargetError
+    from ..train import Trainer
+
+    cfg, config_path = training_config(args)
     out = Path(args.out)
     if (out / "last.pt").exists() and not args.resume:
-        from ..errors import RetargetError
         raise RetargetError(f"{out}: already holds a run (last.pt); pass --resume to continue it "
                             f"or choose another --out")
-    trainer = Trainer(cfg, out, config_path=args.config, init=args.init,
+    trainer = Trainer(cfg, out, config_path=config_path, init=args.init,
                       progress=not args.no_progress)
     if args.resume and trainer.resume():
         print(f"resumed {out / 'last.pt'} at step {trainer.step}")
