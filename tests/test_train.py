@@ -150,3 +150,43 @@ def test_committed_configs_load_and_ablations_differ_from_default_only_where_nam
     loop.write_text("base: loop.yaml\n")
     with pytest.raises(RetargetError, match="includes itself"):
         load_config(loop)
+
+
+def _train_cmd(out, steps=6, extra=()):
+    cfg = out.parent / f"{out.name}.yaml"
+    cfg.write_text(f"base: {TINY}\ntrain: {{steps: {steps}, ckpt_minutes: 0.0, val_every: 100}}\n")
+    return [sys.executable, "-m", "retarget.cli", "train", "--config", str(cfg), "--out", str(out),
+            "--no-progress", *extra]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", ["SIGKILL", "SIGINT"])
+def test_interrupted_run_resumes_to_the_same_parameters(tmp_path, sig):
+    import signal
+    import time
+
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    subprocess.run(_train_cmd(tmp_path / "full"), check=True, env=env, cwd=ROOT, capture_output=True)
+    proc = subprocess.Popen(_train_cmd(tmp_path / "cut", steps=6), env=env, cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    last = tmp_path / "cut" / "last.pt"
+    while time.monotonic() < deadline and proc.poll() is None:  # wait for a mid-run checkpoint
+        if last.exists() and 2 <= torch.load(last, weights_only=True)["step"] < 6:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run ended before it could be interrupted"
+    proc.send_signal(getattr(signal, sig))
+    _, err = proc.communicate(timeout=120)
+    if sig == "SIGINT":  # Ctrl-C: finishes the step, saves, exits cleanly
+        assert proc.returncode == 0 and "Traceback" not in err, err[-2000:]
+    stopped_at = torch.load(last, weights_only=True)["step"]
+    assert stopped_at < 6
+    res = subprocess.run(_train_cmd(tmp_path / "cut", extra=("--resume",)), env=env, cwd=ROOT,
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert f"at step {stopped_at}" in res.stdout
+    a = load_checkpoint(tmp_path / "full" / "model.pt")["model"]
+    b = load_checkpoint(tmp_path / "cut" / "model.pt")["model"]
+    for k in a:
+        assert torch.allclose(a[k], b[k], atol=1e-6), k
