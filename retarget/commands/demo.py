@@ -1,6 +1,7 @@
 """``retarget demo``: the main job on embedded defaults, with exact ground truth.
 
-A smooth synthetic performance on one procedural test identity (full head, adaptive tessellation) is
+A short keyframed performance (smile, jaw open, pucker and blink, frown, jaw left) on one procedural
+test identity (full head, adaptive tessellation) is
 retargeted onto another test identity with another topology (a jittered face-only crop), with the
 bundled checkpoint. Because both are procedural rigs, the target's own rig driven by the same
 weights is the exact ground truth, so the demo prints true errors.
@@ -14,15 +15,27 @@ HELP = "retarget a synthetic performance onto another identity and topology; wri
 EXAMPLE = """retarget demo
 retarget demo -o demo_out --frames 60"""
 
+FPS = 30.0
+#: Keyframes of the demo performance: (seconds, {ICT name: weight}); smoothstep in between.
+PERFORMANCE = (
+    (0.0, {}),
+    (0.5, {"mouthSmile_L": 0.9, "mouthSmile_R": 0.9, "cheekSquint_L": 0.4, "cheekSquint_R": 0.4}),
+    (1.0, {"jawOpen": 0.7, "browInnerUp_L": 0.7, "browInnerUp_R": 0.7}),
+    (1.5, {"mouthPucker": 0.9, "eyeBlink_L": 1.0, "eyeBlink_R": 1.0}),
+    (2.0, {"mouthFrown_L": 0.7, "mouthFrown_R": 0.7, "browDown_L": 0.8, "browDown_R": 0.8,
+           "noseSneer_L": 0.5, "noseSneer_R": 0.5}),
+    (2.5, {"jawLeft": 0.6, "mouthLeft": 0.6, "eyeBlink_L": 1.0}),
+    (3.0, {}),
+)
 SOURCE = dict(identity_seed=0, n_vertices=3000, kind="adaptive", region="full", tess_seed=1)
 TARGET = dict(identity_seed=1, n_vertices=2000, kind="jittered", region="face", tess_seed=2)
-PREVIEW_FRAMES = 4
 ERROR_SCALE_MM = 3.0  # the heatmap saturates at this error
 
 
 def add_arguments(p):
     p.add_argument("-o", "--out", default="demo_out", help="output folder (default demo_out)")
-    p.add_argument("--frames", type=int, default=48, help="frames of the performance (default 48)")
+    p.add_argument("--frames", type=int, default=90,
+                   help="frames of the 3-second performance (default 90, i.e. 30 fps)")
     p.add_argument("--checkpoint", help="model checkpoint (default: the bundled one)")
     p.add_argument("--device", help="cpu or cuda (default: cuda when present)")
 
@@ -40,10 +53,26 @@ def procedural_mesh(spec: dict, n_segments: int):
     return rig, Mesh(rig.neutral, rig.faces, f"procedural {spec['kind']} {spec['region']}")
 
 
+def performance(n_frames: int):
+    """The keyframed demo performance resampled to ``n_frames``: (T,53) float32 in [0,1]."""
+    import numpy as np
+    from data_synth.facs import FACS_INDEX
+
+    times = np.array([t for t, _ in PERFORMANCE])
+    keys = np.zeros((len(PERFORMANCE), len(FACS_INDEX)), np.float32)
+    for i, (_, pose) in enumerate(PERFORMANCE):
+        for name, w in pose.items():
+            keys[i, FACS_INDEX[name]] = w
+    t = np.linspace(0.0, times[-1], max(n_frames, 2))[:n_frames]
+    i = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2)
+    a = (t - times[i]) / (times[i + 1] - times[i])
+    a = (a * a * (3 - 2 * a))[:, None]  # smoothstep
+    return ((1 - a) * keys[i] + a * keys[i + 1]).astype(np.float32)
+
+
 def run(args) -> int:
     import numpy as np
 
-    from data_synth.sampling import smooth_sequence
     from ..api import Retargeter
     from ..glb import write_rig_glb, write_sequence_glb
     from ..io import save_mesh
@@ -58,7 +87,10 @@ def run(args) -> int:
     L = r.cfg.n_segments
     src_rig, src_neutral = procedural_mesh(SOURCE, L)
     tgt_rig, tgt_neutral = procedural_mesh(TARGET, L)
-    weights = smooth_sequence(np.random.default_rng(0), args.frames).astype(np.float32)
+    if args.frames < 1:
+        from ..errors import RetargetError
+        raise RetargetError(f"--frames must be >= 1, got {args.frames}")
+    weights = performance(args.frames)
     src_frames = [Mesh(v, src_rig.faces, f"source frame {t}")
                   for t, v in enumerate(src_rig.evaluate(weights))]
     print(f"source: test identity {SOURCE['identity_seed']}, {src_neutral.n_vertices} vertices "
@@ -74,13 +106,16 @@ def run(args) -> int:
 
     for t, v in enumerate(pred):
         save_mesh(out / "result" / f"frame_{t:04d}.obj", v, tgt_rig.faces)
-    write_sequence_glb(out / "result.glb", pred, tgt_rig.faces, fps=30.0)
+    fps = FPS * args.frames / 90.0
+    write_sequence_glb(out / "result.glb", pred, tgt_rig.faces, fps=fps)
     write_rig_glb(out / "target_rig.glb", rig.neutral, tgt_rig.faces, rig.deltas, FACS_NAMES,
-                  animation=inverted, fps=30.0)
+                  animation=inverted, fps=fps)
 
     renderer = Renderer(192)
     tiles, labels = [], []
-    for t in np.linspace(0, args.frames - 1, PREVIEW_FRAMES).astype(int):
+    key_times = [t for t, pose in PERFORMANCE if pose]
+    for t in sorted({min(args.frames - 1, round(k / PERFORMANCE[-1][0] * (args.frames - 1)))
+                     for k in key_times}):
         err = np.sqrt(squared_errors_mm2(pred[t], gt[t]))
         tiles += [renderer.render(src_frames[t].vertices, src_rig.faces),
                   renderer.render(pred[t], tgt_rig.faces), renderer.render(gt[t], tgt_rig.faces),
