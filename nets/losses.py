@@ -115,22 +115,23 @@ def decoder_loss(pred: torch.Tensor, gt: torch.Tensor, rest: torch.Tensor, faces
 
 def supervised_code_loss(z: torch.Tensor, z_gt: torch.Tensor) -> torch.Tensor:
     """||z[:K] - z_GT||² + ||z[K:]||² (eq. 4): the first K dims follow the K true coefficients and
-    the extra dims go to zero. z (..., D), z_gt (..., K) with K <= D. Mean over the D dims (and
-    batch).
+    the extra dims go to zero. z (..., D), z_gt (..., K) with K <= D. Squared norms summed over the
+    D dims, as the equation writes them, then averaged over the batch. (A mean over the dims would
+    weaken the code supervision D times against L_dec.)
     """
     k = z_gt.shape[-1]
     if k > z.shape[-1]:
         raise ValueError(f"{k} true coefficients do not fit a {z.shape[-1]}-dim code")
-    return (z[..., :k] - z_gt).pow(2).sum(-1).add(z[..., k:].pow(2).sum(-1)).mean() / z.shape[-1]
+    return (z[..., :k] - z_gt).pow(2).sum(-1).add(z[..., k:].pow(2).sum(-1)).mean()
 
 
 def identity_loss(z_id: torch.Tensor, identity_gt: torch.Tensor) -> torch.Tensor:
-    """L_ID (eq. 4): z_id (..., 128) vs the J identity coefficients (..., J); mean over 128 dims."""
+    """L_ID (eq. 4): z_id (..., 128) vs the J identity coefficients (..., J); summed over dims."""
     return supervised_code_loss(z_id, identity_gt)
 
 
 def expression_loss(z_ge: torch.Tensor, weights_gt: torch.Tensor) -> torch.Tensor:
-    """L_Exp (eq. 4): z_ge (..., 128) vs the 53 true FACS weights (..., 53); mean over 128 dims."""
+    """L_Exp (eq. 4): z_ge (..., 128) vs the 53 true FACS weights (..., 53); summed over dims."""
     return supervised_code_loss(z_ge, weights_gt)
 
 
