@@ -152,3 +152,25 @@ def test_rig_and_sequence_glb_pass_the_khronos_validator(tmp_path):
     for name in ("rig.glb", "seq.glb"):
         issues = khronos_issues(tmp_path / name)
         assert issues["numErrors"] == 0, (name, issues["messages"])
+
+
+def test_rig_glb_imports_into_blender_with_named_shape_keys(tmp_path):
+    import json
+    import shutil
+    import subprocess
+
+    if shutil.which("blender") is None:
+        pytest.skip("Blender is not installed")
+    m = trimesh.creation.icosphere(2)
+    names = ["jawOpen", "mouthSmile_L", "eyeBlink_R"]
+    deltas = np.random.default_rng(1).normal(size=(3, len(m.vertices), 3)).astype(np.float32) * 0.1
+    write_rig_glb(tmp_path / "rig.glb", m.vertices, m.faces, deltas, names,
+                  animation=np.random.default_rng(2).random((8, 3)), fps=30)
+    script = Path(__file__).parent / "tools" / "blender_import.py"
+    res = subprocess.run(["blender", "-b", "--python", str(script), "--", str(tmp_path / "rig.glb")],
+                         capture_output=True, text=True, timeout=300)
+    line = [ln for ln in res.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert line, res.stdout[-2000:] + res.stderr[-2000:]
+    out = json.loads(line[0][len("RESULT "):])
+    assert out["meshes"] == 1 and out["vertices"] == len(m.vertices)
+    assert out["shape_keys"] == ["Basis", *names] and out["animated"]
