@@ -2,6 +2,7 @@
 tessellation (ARCHITECTURE.md, `data_synth.rig`)."""
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -9,8 +10,9 @@ import numpy as np
 from .expressions import expression_deltas
 from .facs import N_FACS
 from .head import surface
+from .identity import sample_identity
 from .segmentation import SEGMENT_NAMES, segment_labels
-from .tessellate import Tessellation
+from .tessellate import Tessellation, tessellate
 
 
 @dataclass
@@ -46,3 +48,22 @@ def build_rig(identity, tess: Tessellation, n_segments: int = 20) -> Rig:
         identity=identity,
         segment_names=SEGMENT_NAMES[n_segments],
     )
+
+
+def benchmark_build(sizes=(5000, 30000), repeats: int = 5) -> dict[int, float]:
+    """Median seconds of ``build_rig`` (one identity, all 53 shapes) per tessellation size."""
+    out = {}
+    for n in sizes:
+        tess = tessellate(n, kind="adaptive")
+        times = []
+        for seed in range(repeats):
+            start = time.perf_counter()
+            build_rig(sample_identity(seed), tess)
+            times.append(time.perf_counter() - start)
+        out[tess.n_vertices] = float(np.median(times))
+    return out
+
+
+if __name__ == "__main__":  # python -m data_synth.rig: the rig synthesis benchmark
+    for n_vertices, seconds in benchmark_build().items():
+        print(f"53-shape rig at {n_vertices} vertices: {seconds:.3f} s (median of 5 identities)")

@@ -125,7 +125,8 @@ def test_bad_arguments_and_files(tmp_path, rig):
 # ----------------------------------------------------------------------------------------------
 # The Khronos glTF validator (npm package gltf-validator), installed by `make test` into
 # build/gltf-validator when npm is present; the test is skipped where it is not.
-VALIDATOR_DIR = Path(os.environ.get("GLTF_VALIDATOR_DIR", Path(__file__).resolve().parents[1] / "build" / "gltf-validator"))
+VALIDATOR_DIR = Path(os.environ.get("GLTF_VALIDATOR_DIR",
+                                    Path(__file__).resolve().parents[1] / "build" / "gltf-validator")).resolve()
 
 
 def khronos_issues(path) -> dict:

@@ -1,5 +1,4 @@
 """The 53 expression operators and the rig (data_synth.expressions, data_synth.rig)."""
-import time
 
 import numpy as np
 import pytest
@@ -146,13 +145,11 @@ def test_mouth_close_corrects_jaw_open():
     assert np.linalg.norm(closed[0] - closed[1]) < 0.4
 
 
-def test_rig_evaluate_and_speed():
+def test_rig_evaluate():
+    # (its speed is a benchmark, not a test: `python -m data_synth.rig` prints it)
     tess = tessellate(5000, kind="regular")
     z = sample_identity(1)
-    start = time.perf_counter()
     rig = build_rig(z, tess)
-    elapsed = time.perf_counter() - start
-    assert elapsed < 2.0            # measured ~0.1 s; 1 s budget with slack for a loaded CI machine
     assert rig.deltas.shape == (53, rig.neutral.shape[0], 3) and rig.deltas.dtype == np.float32
     w = np.zeros(53)
     w[K["jawOpen"]] = 0.5
