@@ -29,11 +29,12 @@ import torch
 from data_synth.facs import FACS_INDEX, N_FACS
 from nets.model import NFSModel, TargetCodes, weights_to_code
 
+from .canonical import Canonicaliser
+from .checkpoint import load_checkpoint, model_from_checkpoint
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
 from .mesh import Mesh
-from .checkpoint import load_checkpoint, model_from_checkpoint
-from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh
+from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh, vertex_features
 from .smoothing import smooth_codes
 
 DEFAULT_CHECKPOINT = "default.pt"
@@ -127,37 +128,27 @@ class Retargeter:
                             IMAGE_CHANNELS[self.cfg.image_channels], canon=canon, ops=ops,
                             cache_dir=self.cache_dir)
 
-    def _image_code(self, prepared: PreparedMesh) -> torch.Tensor:
-        return self.model.image_code(torch.from_numpy(prepared.image)[None].to(self.device))[0]
-
     @torch.no_grad()
     def prepare(self, mesh: Mesh) -> Target:
         """Operators, frontal image, z_ID and skinning weights of a target neutral mesh."""
         if isinstance(mesh, Target):
             return mesh
         check_head_like(mesh, "target")
-        full = self._prepare_features_only(mesh)
+        canon = Canonicaliser.fit(mesh.vertices, name=mesh.name or "target")
         if mesh.n_vertices > self.proxy_vertices:
-            proxy_mesh, cluster = cluster_decimate(mesh.vertices, mesh.faces, self.proxy_vertices)
-            proxy = self._prepare(Mesh(proxy_mesh[0], proxy_mesh[1], mesh.name), canon=full[0])
+            (pv, pf), cluster = cluster_decimate(mesh.vertices, mesh.faces, self.proxy_vertices)
+            proxy = self._prepare(Mesh(pv, pf, mesh.name), canon=canon)
+            feat = vertex_features(canon.to_canonical(mesh.vertices).astype(np.float32), mesh.faces)
         else:
-            proxy, cluster = self._prepare(mesh, canon=full[0]), None
-        feat_p, _, ops_p = proxy.torch_inputs(self.device)
-        c = self._image_code(proxy)
+            proxy, cluster = self._prepare(mesh, canon=canon), None
+            feat = proxy.feat  # the proxy is the mesh itself: its features are computed already
+        feat_p, img_p, ops_p = proxy.torch_inputs(self.device)
+        c = self.model.image_code(img_p)[0]
         codes = self.model.encode_target(feat_p, c, ops_p)
         if cluster is not None and codes.omega_skin is not None:
             idx = torch.from_numpy(cluster).to(self.device)
             codes = TargetCodes(codes.z_id, codes.z_skin[idx], codes.omega_skin[idx])
-        feat = torch.from_numpy(full[1]).to(self.device)
-        return Target(mesh, proxy, feat, c, codes)
-
-    def _prepare_features_only(self, mesh: Mesh):
-        """(canonicaliser, (V,6) features) of a mesh without operators (cheap at any size)."""
-        from .canonical import Canonicaliser
-        from .prepare import vertex_features
-        canon = Canonicaliser.fit(mesh.vertices, name=mesh.name or "target")
-        cv = canon.to_canonical(mesh.vertices).astype(np.float32)
-        return canon, vertex_features(cv, mesh.faces)
+        return Target(mesh, proxy, torch.from_numpy(feat).to(self.device), c, codes)
 
     # --------------------------------------------------------------------------- codes
     @torch.no_grad()
