@@ -191,3 +191,20 @@ def test_interrupted_run_resumes_to_the_same_parameters(tmp_path, sig):
     b = load_checkpoint(tmp_path / "cut" / "model.pt")["model"]
     for k in a:
         assert torch.allclose(a[k], b[k], atol=1e-6), k
+
+
+def test_train_command_overrides_the_step_and_time_budget():
+    import argparse
+    from retarget.commands import train as train_cmd
+    p = argparse.ArgumentParser()
+    train_cmd.add_arguments(p)
+    cfg, _ = train_cmd.training_config(p.parse_args(
+        ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--steps", "1500",
+         "--max-minutes", "0"]))
+    assert cfg["train"]["steps"] == 1500 and cfg["train"]["max_minutes"] == 0
+    cfg, _ = train_cmd.training_config(p.parse_args(
+        ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x"]))
+    assert cfg["train"]["max_minutes"] == 60
+    with pytest.raises(RetargetError, match="--max-minutes"):
+        train_cmd.training_config(p.parse_args(
+            ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--max-minutes", "-1"]))

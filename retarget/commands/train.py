@@ -7,6 +7,7 @@ from pathlib import Path
 HELP = "train the network from a config (resumable; torchrun for several processes)"
 EXAMPLE = """retarget train --config configs/train/default.yaml --out runs/default
 retarget train --config configs/train/default.yaml --out runs/default --resume
+retarget train --config configs/train/no_bp.yaml --steps 1500 --max-minutes 0 --out runs/no_bp  # fixed step budget
 torchrun --nproc_per_node 2 -m retarget.cli train --config configs/train/tiny.yaml --out runs/ddp
 retarget train --rig my_rig.npz --init runs/default/model.pt --out runs/mine    # fine-tune
 retarget train --rig ICT-FaceKit/FaceXModel --keep-vertices 0:11248 --init model.pt --out runs/ict"""
@@ -29,12 +30,16 @@ def add_arguments(p):
     p.add_argument("--rig-mix", type=float,
                    help="fraction of steps drawn from the rig, the rest procedural (default 0.5)")
     p.add_argument("--steps", type=int, help="override train.steps")
+    p.add_argument("--max-minutes", type=float,
+                   help="override train.max_minutes (0 = no time limit: the budget and the "
+                        "learning-rate schedule follow --steps only, whatever else runs on the "
+                        "machine)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def training_config(args) -> tuple[dict, str]:
     """(config, its path) from the arguments: --config, or with --rig the fine-tuning config whose
-    model is the --init checkpoint's; --rig, --keep-vertices, --rig-mix and --steps applied."""
+    model is the --init checkpoint's; --rig, --keep-vertices, --rig-mix, --steps and --max-minutes applied."""
     from ..errors import RetargetError
     from ..train import load_checkpoint, load_config
 
@@ -57,6 +62,10 @@ def training_config(args) -> tuple[dict, str]:
         cfg["data"]["rig_mix"] = args.rig_mix
     if args.steps is not None:
         cfg["train"]["steps"] = args.steps
+    if args.max_minutes is not None:
+        if args.max_minutes < 0:
+            raise RetargetError(f"--max-minutes must be >= 0, got {args.max_minutes}")
+        cfg["train"]["max_minutes"] = args.max_minutes
     return cfg, path
 
 
