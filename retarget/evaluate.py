@@ -10,6 +10,9 @@ number below has exact ground truth unless a table says otherwise:
   full head ↔ face crop, regular ↔ jittered).
 - ``inverse``: weights predicted from a frame of an identity's rig, re-applied to that rig: MSE to
   the frame, and the weight MAE.
+- ``animate``: the self cases driven from their FACS weights instead of a source mesh (z_GE =
+  [w, 0], the user's "drive any mesh from weights" job); beside ``self`` on the same targets and
+  weights it splits the error between the expression encoder and the decoder.
 - ``jitter``: cross-identity transfer of a smooth weight sequence: the mean norm of the second
   difference of the vertex positions (mm), prediction vs GT, raw and with each temporal filter.
 - ``real_rig``: the artist-made ARKit rig ``makehuman_arkit.npz`` (one MakeHuman identity):
@@ -48,7 +51,8 @@ from .metrics import segment_mse_mm2, second_difference_jitter_mm, squared_error
 from .oracle import displacement_transfer, uv_transfer_matrix
 from .smoothing import FILTERS, smooth_codes
 
-SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig")
+#: Suite names; a suite's index seeds its weights, so new suites go at the end.
+SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig", "animate")
 TRANSFER_SUITES = ("self", "cross_identity", "cross_topology")
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CONFIG = REPO_ROOT / "configs" / "eval" / "default.yaml"
@@ -277,6 +281,10 @@ class NetworkMethod:
         target = self._target(case.target)
         return {f: self.r.decode(target, z if f is None else smooth_codes(z, f, fps)) for f in filters}
 
+    def animate(self, case: Case) -> np.ndarray:
+        """(T,Vt,3) cm: the target driven by the case's FACS weights (``Retargeter.animate``)."""
+        return self.r.animate(self._target(case.target), case.target_weights)
+
     def invert(self, case: Case) -> np.ndarray:
         """(T,53) ICT weights in [0,1] predicted from the source frames."""
         frames, neutral = self._source(case)
@@ -301,6 +309,9 @@ class OracleMethod:
         pred = displacement_transfer(self._maps[key][1], case.source.neutral, case.source_frames,
                                      case.target.neutral)
         return {None: pred}
+
+    def animate(self, case: Case):
+        return None
 
     def invert(self, case: Case):
         return None
@@ -399,6 +410,21 @@ class Evaluation:
 
     def suite_cross_topology(self) -> dict:
         return self._transfer_suite("cross_topology")
+
+    def suite_animate(self) -> dict:
+        """Driving from FACS weights: the ``self`` cases (same targets, same weights) decoded from
+        z_GE = [w, 0]; MSE and segment-averaged MSE in mm² against the rig."""
+        res = {"exact_gt": True, "methods": {}}
+        for m in self.methods:
+            errs = []
+            for case in self._bar(self.data.cases("self"), f"animate [{m.name}]"):
+                pred = m.animate(case)
+                if pred is None:
+                    break
+                errs.append(case_errors(pred, case.gt, case.target.segments, self.cfg["n_segments"]))
+            if errs:
+                res["methods"][m.name] = summarise(errs)
+        return res
 
     def suite_inverse(self) -> dict:
         """Inverse rigging: rig MSE of the re-evaluated predicted weights, and the weight MAE."""
@@ -518,6 +544,13 @@ def to_markdown(results: dict) -> str:
         rows = [[m, fmt(get("inverse", m, "mse_mm2")), fmt(get("inverse", m, "seg_mse_mm2")),
                  fmt(get("inverse", m, "weight_mae"))] for m in methods]
         out.append(md_table(["method", "rig MSE", "segment-avg MSE", "weight MAE"], rows) + "\n")
+    if "animate" in s:
+        out.append("### Driving from FACS weights (animate: the self-retargeting targets and weights, "
+                   "decoded from z_GE = [w, 0]; exact GT)\n")
+        rows = [[m, fmt(get("animate", m, "mse_mm2")), fmt(get("animate", m, "seg_mse_mm2")),
+                 fmt(get("self", m, "mse_mm2"))] for m in methods if m in s["animate"]["methods"]]
+        out.append(md_table(["method", "MSE", "segment-avg MSE", "self-retargeting MSE (same cases)"],
+                            rows) + "\n")
     if "jitter" in s:
         j = s["jitter"]
         filters = ["raw", *FILTERS]

@@ -130,6 +130,9 @@ class GroundTruthMethod:
     def transfer(self, case, filters=(None,), fps=30.0):
         return {f: case.gt + self.offset for f in filters}
 
+    def animate(self, case):
+        return case.gt + self.offset
+
     def invert(self, case):
         return case.source_weights
 
@@ -139,7 +142,7 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     d = np.array([0.0, 0.2, 0.1])
     expected = 100 * (d ** 2).sum()
     res = Evaluation(cfg, [GroundTruthMethod(d), OracleMethod()], progress=False).run(
-        ["self", "cross_topology", "inverse", "jitter"])["suites"]
+        ["self", "cross_topology", "inverse", "jitter", "animate"])["suites"]
     gt = res["self"]["methods"]["gt+offset"]
     assert gt["mse_mm2"] == pytest.approx(expected) and gt["seg_mse_mm2"] == pytest.approx(expected)
     assert res["self"]["methods"]["oracle (u,v)"]["mse_mm2"] < 1e-8
@@ -147,6 +150,8 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     inv = res["inverse"]["methods"]["gt+offset"]
     assert inv["mse_mm2"] < 1e-8 and inv["weight_mae"] == 0.0
     assert "oracle (u,v)" not in res["inverse"]["methods"]
+    assert res["animate"]["methods"]["gt+offset"]["mse_mm2"] == pytest.approx(expected)
+    assert "oracle (u,v)" not in res["animate"]["methods"]
     jit = res["jitter"]["methods"]["gt+offset"]["raw"]
     assert jit["jitter_mm"] == pytest.approx(res["jitter"]["gt_jitter_mm"])
 
@@ -166,13 +171,16 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
         assert set(res["suites"][suite]["methods"]) == {"full", "noskin", "oracle (u,v)"}, suite
     assert res["suites"]["self"]["methods"]["oracle (u,v)"]["mse_mm2"] < 1e-8
     assert res["suites"]["self"]["methods"]["full"]["mse_mm2"] > 0
+    assert set(res["suites"]["animate"]["methods"]) == {"full", "noskin"}
+    assert res["suites"]["animate"]["methods"]["full"]["mse_mm2"] > 0
     assert len(res["suites"]["self"]["methods"]["full"]["per_segment_mm2"]) == 20
     real = res["suites"]["real_rig"]["methods"]["full"]
     assert set(real["per_shape"]) == {"jawOpen", "eyeBlinkLeft"}
     assert real["sampled"]["invert"]["weight_mae"] >= 0
     md = (out / "eval.md").read_text()
     for title in ("Self-retargeting", "Cross-identity", "Cross-topology", "Inverse rigging",
-                  "Jitter", "Real ARKit rig", "| full |", "| oracle (u,v) |"):
+                  "Jitter", "Real ARKit rig", "Driving from FACS weights", "| full |",
+                  "| oracle (u,v) |"):
         assert title in md
     pngs = sorted(heat.glob("*.png"))
     assert len(pngs) == 3 and all(p.stat().st_size > 100 for p in pngs)
