@@ -8,6 +8,36 @@ import yaml
 
 from .errors import RetargetError
 
+#: configs/ of a source checkout (DESIGN.md section 8); a wheel ships the same files as the
+#: package ``retarget.configs`` (pyproject.toml maps the folder into the package).
+CHECKOUT_CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
+def configs_dir() -> Path:
+    """The folder of the shipped configs (``train/``, ``eval/``, ``synth/``): the checkout's
+    ``configs/`` when running from one, else the copy installed with the package."""
+    if (CHECKOUT_CONFIGS / "train" / "default.yaml").is_file():
+        return CHECKOUT_CONFIGS
+    return Path(__file__).resolve().parent / "configs"
+
+
+def find_config(spec, kind: str) -> Path:
+    """A config file from a command line: ``spec`` itself when it is a file, else the shipped
+    config of that name: ``NAME``, ``NAME.yaml`` or ``configs/<kind>/NAME.yaml`` (so
+    ``--config no_skinning`` and the README's commands work after a plain pip install).
+    RetargetError naming ``spec`` and the shipped names when neither exists."""
+    path = Path(spec)
+    if path.is_file():
+        return path
+    name = path.name if path.suffix == ".yaml" else f"{path.name}.yaml"
+    if path.parent == Path(".") or path.parent.as_posix().endswith(f"configs/{kind}"):
+        shipped = configs_dir() / kind / name
+        if shipped.is_file():
+            return shipped
+    names = sorted(p.stem for p in (configs_dir() / kind).glob("*.yaml"))
+    raise RetargetError(f"{spec}: no such {kind} config file (the shipped {kind} configs, usable "
+                        f"by name: {', '.join(names)})")
+
 
 def read_yaml(path, what: str = "config") -> dict:
     """A YAML mapping from ``path``; RetargetError naming the file if it is unreadable, not YAML,

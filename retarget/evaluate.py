@@ -44,7 +44,7 @@ from data_synth.rig import build_rig
 from data_synth.sampling import sample_weights, smooth_sequence
 from data_synth.tessellate import tessellate
 
-from .config import merge, read_yaml
+from .config import configs_dir, find_config, merge, read_yaml
 from .errors import RetargetError
 from .mesh import Mesh
 from .metrics import segment_mse_mm2, second_difference_jitter_mm, squared_errors_mm2, weight_mae
@@ -55,19 +55,27 @@ from .smoothing import FILTERS, smooth_codes
 SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig", "animate")
 TRANSFER_SUITES = ("self", "cross_identity", "cross_topology")
 REPO_ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_CONFIG = REPO_ROOT / "configs" / "eval" / "default.yaml"
 ORACLE_NAME = "oracle (u,v)"
 
 
 # ------------------------------------------------------------------------------------- config
 def load_eval_config(path=None) -> dict:
     """The eval config: ``configs/eval/default.yaml`` (every key, the committed settings), with the
-    keys of ``path`` (e.g. ``configs/eval/tiny.yaml``) overriding it. RetargetError names the file
-    and the unknown key."""
-    base = read_yaml(DEFAULT_CONFIG, "eval config")
-    if path is None or Path(path).resolve() == DEFAULT_CONFIG:
+    keys of ``path`` (a file, e.g. ``configs/eval/tiny.yaml``, or a shipped name such as ``tiny``)
+    overriding it. RetargetError names the file and the unknown key."""
+    default = configs_dir() / "eval" / "default.yaml"
+    base = read_yaml(default, "eval config")
+    if path is None:
+        return base
+    path = find_config(path, "eval")
+    if path.resolve() == default.resolve():
         return base
     return merge(base, read_yaml(path, "eval config"), str(path))
+
+
+def real_rig_path(cfg: dict) -> Path:
+    """The eval config's real rig: ``real_rig.path``, relative to the repository root."""
+    return REPO_ROOT / cfg["real_rig"]["path"]
 
 
 # ------------------------------------------------------------------------------------- ARKit
@@ -186,7 +194,7 @@ class EvalData:
 
     def real_rig(self) -> RealRig:
         if self._real is None:
-            self._real = RealRig.load(REPO_ROOT / self.cfg["real_rig"]["path"])  # relative: to the repo
+            self._real = RealRig.load(real_rig_path(self.cfg))
         return self._real
 
     # ---- suites

@@ -222,3 +222,18 @@ def test_config_and_checkpoint_errors(tmp_path):
     with pytest.raises(RetargetError, match="real rig not found"):
         RealRig.load(tmp_path / "none.npz")
     assert main(["eval", "--config", str(TINY), "--checkpoint", str(tmp_path / "x.pt")]) == 2
+
+
+def test_a_missing_real_rig_leaves_its_suite_out_unless_asked_for(tmp_path, capsys):
+    ck = tiny_checkpoint(tmp_path / "m.pt")
+    cfg = tmp_path / "norig.yaml"
+    cfg.write_text((TINY.read_text().replace("../shared/rigs/makehuman_arkit.npz",
+                                             str(tmp_path / "absent.npz"))))
+    assert main(["eval", "--config", str(cfg), "--checkpoint", str(ck), "--no-oracle",
+                 "--no-progress", "--out", str(tmp_path / "out")]) == 0
+    assert "absent.npz not found, the real_rig suite is left out" in capsys.readouterr().out
+    res = json.loads((tmp_path / "out" / "eval.json").read_text())
+    assert "real_rig" not in res["suites"] and "self" in res["suites"]
+    assert main(["eval", "--config", str(cfg), "--checkpoint", str(ck), "--suite", "real_rig",
+                 "--no-progress"]) == 2
+    assert "absent.npz: real rig not found" in capsys.readouterr().err

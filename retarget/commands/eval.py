@@ -32,18 +32,25 @@ def run(args) -> int:
 
     from ..api import Retargeter
     from ..evaluate import (SUITES, Evaluation, NetworkMethod, OracleMethod, load_eval_config,
-                            parse_checkpoints, to_markdown, write_heatmaps, write_results)
+                            parse_checkpoints, real_rig_path, to_markdown, write_heatmaps,
+                            write_results)
 
     cfg = load_eval_config(args.config)
+    suites = list(args.suite or SUITES)
     if args.real_rig:
         cfg["real_rig"]["path"] = str(Path(args.real_rig).resolve())
+    elif not args.suite and not real_rig_path(cfg).is_file():
+        # e.g. after a pip install, without the repository's ../shared/rigs: run the rest
+        print(f"note: {real_rig_path(cfg)} not found, the real_rig suite is left out "
+              f"(pass --real-rig RIG.npz to run it)")
+        suites.remove("real_rig")
     checkpoints = parse_checkpoints(args.checkpoint)
     methods = [NetworkMethod(name, Retargeter.load(path, device=args.device))
                for name, path in checkpoints]
     if not args.no_oracle:
         methods.append(OracleMethod())
     evaluation = Evaluation(cfg, methods, progress=not args.no_progress)
-    results = evaluation.run(args.suite or SUITES)
+    results = evaluation.run(suites)
     results["checkpoints"] = {name: str(path) for name, path in checkpoints}
     markdown = to_markdown(results)
     print(markdown)

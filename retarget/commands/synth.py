@@ -9,12 +9,12 @@ EXAMPLE = """retarget synth --config configs/synth/default.yaml --out data/synth
 retarget synth --config configs/synth/tiny.yaml --out /tmp/tiny --overwrite
 retarget synth --preview --out previews --identity-seed 3"""
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "synth" / "default.yaml"
 
 
 def add_arguments(p):
-    p.add_argument("--config", default=str(DEFAULT_CONFIG),
-                   help="synth YAML config (default configs/synth/default.yaml)")
+    p.add_argument("--config", default="default",
+                   help="synth YAML config: a file or a shipped name (default, tiny; default: "
+                        "configs/synth/default.yaml)")
     p.add_argument("--out", required=True, help="output folder (shards + index.json, or PNGs)")
     p.add_argument("--preview", action="store_true",
                    help="write PNG contact sheets instead of a dataset")
@@ -41,7 +41,9 @@ def run(args) -> int:
 
     from data_synth.dataset import generate_items, load_config, write_shards
 
-    config = Path(args.config)
+    from ..config import find_config
+
+    config = find_config(args.config, "synth")
     if not config.is_file():
         raise RetargetError(f"{config}: config file not found")
     try:

@@ -12,13 +12,11 @@ torchrun --nproc_per_node 2 -m retarget.cli train --config configs/train/tiny.ya
 retarget train --rig my_rig.npz --init runs/default/model.pt --out runs/mine    # fine-tune
 retarget train --rig ICT-FaceKit/FaceXModel --keep-vertices 0:11248 --init model.pt --out runs/ict"""
 
-#: The fine-tuning config used with --rig when --config is left out (model from --init).
-FINETUNE_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "train" / "finetune.yaml"
-
 
 def add_arguments(p):
-    p.add_argument("--config", help="training YAML (configs/train/*.yaml); with --rig it defaults to "
-                                    "configs/train/finetune.yaml and the --init checkpoint's model")
+    p.add_argument("--config", help="training YAML: a file or a shipped name (default, no_skinning, "
+                                    "...: configs/train/*.yaml); with --rig it defaults to "
+                                    "finetune and the --init checkpoint's model")
     p.add_argument("--out", required=True, help="run folder: last.pt, model.pt, train_log.csv")
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt if present")
     p.add_argument("--init", help="initialise the weights from this checkpoint (fine-tuning)")
@@ -40,6 +38,7 @@ def add_arguments(p):
 def training_config(args) -> tuple[dict, str]:
     """(config, its path) from the arguments: --config, or with --rig the fine-tuning config whose
     model is the --init checkpoint's; --rig, --keep-vertices, --rig-mix, --steps and --max-minutes applied."""
+    from ..config import find_config
     from ..errors import RetargetError
     from ..train import load_checkpoint, load_config
 
@@ -49,11 +48,12 @@ def training_config(args) -> tuple[dict, str]:
         if not args.init:
             raise RetargetError("--rig without --config needs --init CHECKPOINT (its model is "
                                 "fine-tuned)")
-        cfg = load_config(FINETUNE_CONFIG)
+        path = str(find_config("finetune", "train"))
+        cfg = load_config(path)
         cfg["model"] = dict(load_checkpoint(args.init)["model_config"])
-        path = str(FINETUNE_CONFIG)
     else:
-        cfg, path = load_config(args.config), args.config
+        path = str(find_config(args.config, "train"))
+        cfg = load_config(path)
     if args.rig:
         cfg["data"]["rig"] = args.rig
     if args.keep_vertices is not None:
