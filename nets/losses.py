@@ -171,7 +171,7 @@ def blendshape_reconstruction_loss(model, feat: torch.Tensor, c: torch.Tensor, c
     """
     z_sg = z_ge.detach().reshape(-1, z_ge.shape[-1])
     sub = basis if rows is None else basis[:, rows]
-    dv = torch.stack([model.decode_target(feat, c, codes, z, rows) for z in z_sg])
+    dv = model.decode_target(feat, c, codes, z_sg, rows)                            # (S, n, 3)
     return vertex_loss(dv, blend(z_sg[:, :basis.shape[0]], sub))
 
 

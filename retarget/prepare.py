@@ -5,7 +5,7 @@ The same preparation serves training (targets and sources of procedural rigs) an
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -29,6 +29,8 @@ class PreparedMesh:
     feat: (V,6) float32 per-vertex features v = [canonical position, unit vertex normal].
     ops: the DiffusionNet operators of the (canonical) surface.
     image: (C,H,W) float32 frontal render in [0,1] (the CNN input).
+    The torch copies of ``ops`` are kept per device once made (a training target or source is used
+    for many steps).
     """
 
     canon: Canonicaliser
@@ -37,6 +39,7 @@ class PreparedMesh:
     feat: np.ndarray
     ops: Operators
     image: np.ndarray
+    _torch_ops: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def n_vertices(self) -> int:
@@ -46,7 +49,14 @@ class PreparedMesh:
         """(feat (V,6), image (1,C,H,W), operators) as tensors on ``device``."""
         feat = torch.from_numpy(self.feat).to(device)
         image = torch.from_numpy(self.image).unsqueeze(0).to(device)
-        return feat, image, self.ops.to_torch(device)
+        return feat, image, self.torch_ops(device)
+
+    def torch_ops(self, device) -> TorchOperators:
+        """``ops`` as float32 torch tensors on ``device``, made once per device."""
+        key = str(torch.device(device))
+        if key not in self._torch_ops:
+            self._torch_ops[key] = self.ops.to_torch(device)
+        return self._torch_ops[key]
 
 
 def vertex_features(canonical_vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

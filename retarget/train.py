@@ -150,7 +150,7 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
     codes = model.encode_target(t_feat, c_t, t_ops)
     z_ge = torch.stack([
         model.encode_expression(torch.from_numpy(s.feat).to(device), codes_img[i + 1],
-                                s.entry.mesh.ops.to_torch(device))
+                                s.entry.mesh.torch_ops(device))
         for i, s in enumerate(group.sources)])
     weights = torch.from_numpy(np.stack([s.weights for s in group.sources])).to(device)
     z_exp, w_exp, z_br = z_ge, weights, z_ge
@@ -165,7 +165,7 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
     rows = torch.from_numpy(rows_np).to(device)
     sub_faces = torch.from_numpy(sub_faces_np).to(device)
     rest = t_feat[rows, :3]
-    dv = torch.stack([model.decode_target(t_feat, c_t, codes, g, rows) for g in z_ge])
+    dv = model.decode_target(t_feat, c_t, codes, z_ge, rows)                        # (S, n, 3)
     gt = torch.from_numpy(group.gt_dv).to(device)[:, rows]
     out = L.decoder_loss(rest + dv, rest + gt, rest, sub_faces, loss_cfg["lambda_v"],
                          loss_cfg["lambda_n"], loss_cfg["lambda_g"])

@@ -116,3 +116,13 @@ def test_cuda_matches_cpu():
     out = net.to("cuda")(x_gpu, ops_gpu)
     out.sum().backward()
     torch.testing.assert_close(out.cpu(), expected, atol=1e-4, rtol=1e-4)
+
+
+def test_sparse_matmul_with_a_given_transpose_matches_the_dense_product_and_its_gradient():
+    from nets.diffusion_net import sparse_matmul
+    gen = torch.Generator().manual_seed(0)
+    dense = torch.randn(7, 5, generator=gen, dtype=torch.float64) * (torch.rand(7, 5, generator=gen) < 0.4)
+    x = torch.randn(5, 3, generator=gen, dtype=torch.float64, requires_grad=True)
+    a, a_t = dense.to_sparse_csr(), dense.T.contiguous().to_sparse_csr()
+    torch.testing.assert_close(sparse_matmul(a, a_t, x), dense @ x)
+    assert torch.autograd.gradcheck(lambda v: sparse_matmul(a, a_t, v), (x,))

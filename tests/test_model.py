@@ -97,6 +97,29 @@ def test_chunked_decode_equals_unchunked():
                                    whole[rows], rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.parametrize("use_skinning", [True, False])
+def test_batched_decode_equals_the_decoder_on_the_concatenated_input(use_skinning):
+    """decode_many folds the c and z_ID columns of the first layer into a bias: the same Δv as the
+    paper's decoder on [v, c, z_ID, z_LE], for every one of S codes."""
+    model = tiny_model(use_skinning=use_skinning)
+    tgt = make_mesh(2)
+    c = model.image_code(tgt["img"])[0]
+    codes = model.encode_target(tgt["feat"], c, tgt["ops"])
+    z_ge = torch.rand(3, 128, generator=torch.Generator().manual_seed(0))
+    rows = torch.arange(3, tgt["feat"].shape[0], 3)
+    batched = model.decode_target(tgt["feat"], c, codes, z_ge, rows, chunk=11)
+    assert batched.shape == (3, len(rows), 3)
+    for s in range(3):
+        z_le = model.local_code(codes, z_ge[s], rows)
+        z_le = z_le.expand(len(rows), -1) if z_le.dim() == 1 else z_le
+        x = torch.cat([tgt["feat"][rows], c.expand(len(rows), -1), codes.z_id.expand(len(rows), -1),
+                       z_le], dim=1)
+        torch.testing.assert_close(batched[s], model.decoder(x), rtol=1e-4, atol=1e-5)
+        torch.testing.assert_close(batched[s], model.decode_target(tgt["feat"], c, codes, z_ge[s], rows))
+    with pytest.raises(ValueError, match="decode_many"):
+        model.decode_many(tgt["feat"], c, codes.z_id, torch.zeros(2, 5, 128))
+
+
 def test_group_encodes_target_once_and_matches_pairs(monkeypatch):
     model = tiny_model()
     tgt = make_mesh(2)
@@ -218,3 +241,21 @@ def test_cuda_matches_cpu():
     cuda = pair(model.cuda(), make_mesh(1, device="cuda"), make_mesh(2, device="cuda"))
     assert cuda["dv"].is_cuda
     torch.testing.assert_close(cuda["dv"].cpu(), cpu["dv"], rtol=1e-3, atol=1e-4)
+
+
+def test_row_group_norm_equals_group_norm_forward_and_backward():
+    from nets.cnn import RowGroupNorm
+    torch.manual_seed(0)
+    fast, ref = RowGroupNorm(4, 32), torch.nn.GroupNorm(4, 32)
+    with torch.no_grad():
+        fast.weight.uniform_(0.5, 1.5), fast.bias.uniform_(-1, 1)
+    ref.load_state_dict(fast.state_dict())
+    x = torch.randn(50, 32, requires_grad=True)
+    y_fast, y_ref = fast(x), ref(x)
+    torch.testing.assert_close(y_fast, y_ref, rtol=1e-4, atol=1e-5)
+    g_fast = torch.autograd.grad((y_fast ** 3).sum(), [x, fast.weight, fast.bias])
+    g_ref = torch.autograd.grad((y_ref ** 3).sum(), [x, ref.weight, ref.bias])
+    for a, b in zip(g_fast, g_ref):
+        torch.testing.assert_close(a, b, rtol=1e-3, atol=1e-4)
+    img = torch.randn(2, 32, 5, 5)                # the CNN's 4D inputs take nn.GroupNorm's path
+    torch.testing.assert_close(fast(img), ref(img))
