@@ -26,6 +26,7 @@ time goes for each missed target.
 """
 from __future__ import annotations
 
+import copy
 import csv
 import dataclasses
 import json
@@ -296,22 +297,51 @@ def bench_frames(checkpoint, device: str, n_vertices: int, n_frames: int, repeat
 
 
 # ------------------------------------------------------------------------------------- training
-def bench_train(config, steps: int) -> dict:
-    """Training samples/s of a config (``retarget.train``); config None = the built-in defaults."""
-    from .train import DEFAULTS, Trainer, load_config, merge, model_cfg
+#: The training-speed tricks of the sampling (issue "Sampling and speed"), each measured by undoing
+#: it: (name, what changes without it, data-config overrides).
+TRAIN_TRICKS = (
+    ("operators and images cached", "a new identity and its two tessellations prepared every step "
+     "(rig, operators, renders)", {"pool_size": 1, "pool_refresh": 1}),
+    ("target encoded once for S sources", "one source per target: z_ID, z_Skin and the image code "
+     "per sample", {"sources_per_target": 1}),
+    ("decoding a random subset of faces", "every face and vertex of the target decoded",
+     {"decode_faces": 0}),
+)
 
-    cfg = load_config(config) if config else merge(DEFAULTS, {}, "defaults")
-    cfg["data"].update(pool_size=2, val_identities=1, val_expressions=1)
-    cfg["train"].update(steps=steps + 1000, log_every=1, val_every=10 ** 9, ckpt_minutes=10 ** 6)
+
+def train_samples_per_s(cfg: dict, steps: int) -> tuple[float, str, int]:
+    """(median samples/s over ``steps`` steps after the first, device, sources per step) of a
+    training config (the pool is built before the timing, except what each step prepares)."""
+    from .train import Trainer
+
+    cfg = copy.deepcopy(cfg)
+    cfg["train"].update(steps=steps + 1000, max_minutes=0, log_every=1, val_every=10 ** 9,
+                        ckpt_minutes=10 ** 6)
     with tempfile.TemporaryDirectory() as out:
         trainer = Trainer(cfg, out, progress=False)
         trainer.run(stop_at=steps + 1)
         with open(Path(out) / "train_log.csv") as f:
             rates = [float(row["samples_per_s"]) for row in csv.DictReader(f)][1:]
-    return {"config": str(config or "retarget.train.DEFAULTS"), "device": str(trainer.device),
-            "preset": model_cfg(cfg).to_dict(), "steps_timed": len(rates),
-            "samples_per_target": cfg["data"]["sources_per_target"],
-            "samples_per_s": float(np.median(rates))}
+    return float(np.median(rates)), str(trainer.device), cfg["data"]["sources_per_target"]
+
+
+def bench_train(config, steps: int, tricks: bool = True) -> dict:
+    """Training samples/s of a config (``retarget.train``; None = the built-in defaults) and, with
+    ``tricks``, of the same config with each of ``TRAIN_TRICKS`` undone."""
+    from .train import DEFAULTS, load_config, merge, model_cfg
+
+    cfg = load_config(config) if config else merge(DEFAULTS, {}, "defaults")
+    cfg["data"].update(pool_size=2, val_identities=1, val_expressions=1)
+    rate, device, per_target = train_samples_per_s(cfg, steps)
+    out = {"config": str(config or "retarget.train.DEFAULTS"), "device": device,
+           "preset": model_cfg(cfg).to_dict(), "steps_timed": steps,
+           "samples_per_target": per_target, "samples_per_s": rate, "without": []}
+    for name, change, overrides in TRAIN_TRICKS if tricks else ():
+        undone = copy.deepcopy(cfg)
+        undone["data"].update(overrides)
+        out["without"].append({"trick": name, "change": change,
+                               "samples_per_s": train_samples_per_s(undone, steps)[0]})
+    return out
 
 
 # ------------------------------------------------------------------------------------- report
@@ -394,6 +424,13 @@ def to_markdown(results: dict) -> str:
         t = results["train"]
         out.append(f"### Training ({t['device']}, {t['config']})\n\n{fmt(t['samples_per_s'])} samples/s "
                    f"(median over {t['steps_timed']} steps of {t['samples_per_target']} sources each).\n")
+        if t.get("without"):
+            out.append("Each speed trick of the sampling, measured by undoing it (same config "
+                       "otherwise, median samples/s):\n\n" + md_table(
+                           ["trick", "without it", "samples/s without", "speed-up"],
+                           [[w["trick"], w["change"], fmt(w["samples_per_s"]),
+                             f"{t['samples_per_s'] / w['samples_per_s']:.2f}x"] for w in t["without"]])
+                       + "\n")
     if results.get("targets"):
         out.append("### Targets\n")
         out.append(md_table(["target", "device", "measured", "limit", "met"],

@@ -69,8 +69,11 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
             assert fr[who][op]["latency_ms"] > 0 and fr[who][op]["throughput_fps"] > 0
     assert fr["floor_linear_blendshapes"]["throughput_fps"] > fr["model"]["animate"]["throughput_fps"]
     assert res["train"]["samples_per_s"] > 0 and res["train"]["steps_timed"] == 2
+    without = {w["trick"]: w["samples_per_s"] for w in res["train"]["without"]}
+    assert len(without) == 3 and all(v > 0 for v in without.values())
     md = (out / "bench.md").read_text()
     assert "Target preparation" in md and "linear blendshapes (floor)" in md and "samples/s" in md
+    assert "measured by undoing it" in md and "| target encoded once for S sources |" in md
     assert to_markdown(res) in md
 
 
