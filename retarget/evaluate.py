@@ -639,6 +639,45 @@ def parse_checkpoints(specs) -> list[tuple[str, Path]]:
     return out
 
 
+def merge_results(paths) -> dict:
+    """One results dict from several ``eval.json`` files of the same eval config (e.g. checkpoints
+    evaluated as their trainings finished): their methods side by side, suite by suite, in the
+    order given (the oracle last). RetargetError naming the file for an unreadable file, another config, or a method
+    name that two files share."""
+    import json
+
+    merged = None
+    for path in paths:
+        path = Path(path)
+        try:
+            res = json.loads(path.read_text())
+            config, methods, suites = res["config"], res["methods"], res["suites"]
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise RetargetError(f"{path}: not an eval.json written by `retarget eval` ({e})") from None
+        if merged is None:
+            merged = copy.deepcopy(res)
+            merged.setdefault("checkpoints", {})
+            continue
+        if config != merged["config"]:
+            raise RetargetError(f"{path}: evaluated with another eval config than {paths[0]}; only "
+                                f"results of the same config can share a table")
+        twice = sorted(set(methods) & set(merged["methods"]))
+        if twice:
+            raise RetargetError(f"{path}: method(s) {twice} already in the merged table (rename one "
+                                f"with --checkpoint NAME=PATH)")
+        merged["methods"] += methods
+        merged["checkpoints"].update(res.get("checkpoints", {}))
+        for name, suite in suites.items():
+            if name not in merged["suites"]:
+                merged["suites"][name] = copy.deepcopy(suite)
+            else:
+                merged["suites"][name]["methods"].update(suite["methods"])
+    if merged is None:
+        raise RetargetError("--merge needs at least one eval.json")
+    merged["methods"] = sorted(merged["methods"], key=lambda m: m == ORACLE_NAME)  # oracle last
+    return merged
+
+
 def write_results(out_dir, stem: str, results: dict, markdown: str) -> tuple[Path, Path]:
     """Write ``OUT/stem.json`` and ``OUT/stem.md`` atomically; returns both paths."""
     import json

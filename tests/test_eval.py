@@ -237,3 +237,32 @@ def test_a_missing_real_rig_leaves_its_suite_out_unless_asked_for(tmp_path, caps
     assert main(["eval", "--config", str(cfg), "--checkpoint", str(ck), "--suite", "real_rig",
                  "--no-progress"]) == 2
     assert "absent.npz: real rig not found" in capsys.readouterr().err
+
+
+def test_merge_puts_separately_evaluated_checkpoints_in_one_table(tmp_path, capsys):
+    a, b = tiny_checkpoint(tmp_path / "a.pt"), tiny_checkpoint(tmp_path / "b.pt", use_skinning=False)
+    for name, ck, extra in (("a", a, []), ("b", b, ["--no-oracle"])):
+        assert main(["eval", "--config", str(TINY), "--checkpoint", f"{name}={ck}", "--suite", "self",
+                     "inverse", "--no-progress", "--out", str(tmp_path / name)] + extra) == 0
+    both = tmp_path / "both"
+    assert main(["eval", "--merge", str(tmp_path / "a/eval.json"), str(tmp_path / "b/eval.json"),
+                 "--out", str(both)]) == 0
+    res = json.loads((both / "eval.json").read_text())
+    single = json.loads((tmp_path / "b/eval.json").read_text())
+    assert res["methods"] == ["a", "b", "oracle (u,v)"]
+    assert res["suites"]["self"]["methods"]["b"] == single["suites"]["self"]["methods"]["b"]
+    assert set(res["suites"]["inverse"]["methods"]) == {"a", "b"}
+    assert "| b |" in (both / "eval.md").read_text()
+    capsys.readouterr()
+    # the same method twice, another config, a file that is not an eval.json: clear errors
+    assert main(["eval", "--merge", str(tmp_path / "a/eval.json"), str(tmp_path / "a/eval.json")]) == 2
+    assert "already in the merged table" in capsys.readouterr().err
+    other = json.loads((tmp_path / "a/eval.json").read_text())
+    other["config"]["seed"] = 99
+    other["methods"] = ["c"]
+    (tmp_path / "c.json").write_text(json.dumps(other))
+    assert main(["eval", "--merge", str(tmp_path / "a/eval.json"), str(tmp_path / "c.json")]) == 2
+    assert "c.json: evaluated with another eval config" in capsys.readouterr().err
+    (tmp_path / "junk.json").write_text("[1, 2]")
+    assert main(["eval", "--merge", str(tmp_path / "junk.json")]) == 2
+    assert "junk.json: not an eval.json" in capsys.readouterr().err

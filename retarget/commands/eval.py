@@ -5,7 +5,8 @@ HELP = "accuracy suites (self, cross-identity, cross-topology, inverse, jitter, 
 EXAMPLE = """retarget eval --out results/eval
 retarget eval --checkpoint full=runs/full/model.pt no_skinning=runs/noskin/model.pt \\
     --suite cross_identity cross_topology --heatmaps results/heatmaps --out results/eval
-retarget eval --config configs/eval/tiny.yaml --checkpoint runs/tiny/model.pt"""
+retarget eval --config configs/eval/tiny.yaml --checkpoint runs/tiny/model.pt
+retarget eval --merge results/a/eval.json results/b/eval.json --out results/all   # one table"""
 
 
 def add_arguments(p):
@@ -25,6 +26,9 @@ def add_arguments(p):
                    help="leave out the (u,v) displacement-transfer oracle row")
     p.add_argument("--device", help="torch device (default: cuda when present, else cpu)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--merge", nargs="+", metavar="EVAL_JSON",
+                   help="evaluate nothing: put the methods of these eval.json files (same eval "
+                        "config) into one table, written to --out")
 
 
 def run(args) -> int:
@@ -35,6 +39,15 @@ def run(args) -> int:
                             parse_checkpoints, real_rig_path, to_markdown, write_heatmaps,
                             write_results)
 
+    if args.merge:
+        from ..evaluate import merge_results
+
+        results = merge_results(args.merge)
+        markdown = to_markdown(results)
+        print(markdown)
+        for path in write_results(args.out, "eval", results, markdown) if args.out else ():
+            print(f"wrote {path}")
+        return 0
     cfg = load_eval_config(args.config)
     suites = list(args.suite or SUITES)
     if args.real_rig:
