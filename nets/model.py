@@ -41,8 +41,6 @@ class NFSConfig:
         code_dim: size of z_ID, z_GE, z_LE and ω_Skin (128 in the paper).
         image_code_dim: size of the image code c (128 in the paper).
         n_facs: FACS weights carried by the first dims of z_GE (53, ICT-FaceKit order).
-        n_identity: J, identity coefficients supervising the first dims of z_ID (the model does not
-            use it; the identity loss does). Pass ``data_synth.identity.N_IDENTITY``.
         image_size: H = W of the frontal renders, pixels.
         image_channels: channels of the frontal renders (e.g. 2 = shaded + depth).
         cnn_width: channels of the first CNN convolution.
@@ -63,7 +61,6 @@ class NFSConfig:
     code_dim: int = 128
     image_code_dim: int = 128
     n_facs: int = 53
-    n_identity: int = 50
     image_size: int = 64
     image_channels: int = 2
     cnn_width: int = 16
@@ -91,9 +88,9 @@ class NFSConfig:
             if not ok:
                 raise ValueError(f"NFSConfig.{f.name}: expected a {f.type}"
                                  f"{' >= 1' if f.type == 'int' else ''}, got {value!r}")
-        if self.n_facs > self.code_dim or self.n_identity > self.code_dim:
-            raise ValueError(f"NFSConfig: n_facs ({self.n_facs}) and n_identity ({self.n_identity}) "
-                             f"must not exceed code_dim ({self.code_dim})")
+        if self.n_facs > self.code_dim:
+            raise ValueError(f"NFSConfig: n_facs ({self.n_facs}) must not exceed code_dim "
+                             f"({self.code_dim})")
         if self.decoder_layers < 2:
             raise ValueError(f"NFSConfig.decoder_layers must be >= 2, got {self.decoder_layers}")
         if not 0.0 <= self.dropout < 1.0:
@@ -124,13 +121,19 @@ class NFSConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "NFSConfig":
-        """Inverse of ``to_dict``; missing keys take the defaults, unknown keys raise ValueError."""
+        """Inverse of ``to_dict``; missing keys take the defaults, unknown keys raise ValueError.
+        Keys of earlier versions that no longer mean anything (``_RETIRED_KEYS``) are dropped."""
+        d = {k: v for k, v in d.items() if k not in _RETIRED_KEYS}
         unknown = sorted(set(d) - {f.name for f in dataclasses.fields(cls)})
         if unknown:
             raise ValueError(f"NFSConfig: unknown keys {unknown} (a checkpoint or config from "
                              f"another version?)")
         return cls(**d)
 
+
+#: NFSConfig fields that were removed: ``n_identity`` (the identity loss takes the number of identity
+#: coefficients from the rig; the model never used it), still present in older checkpoints.
+_RETIRED_KEYS = ("n_identity",)
 
 _PRESETS: dict[str, dict[str, Any]] = {
     "paper": dict(image_size=256, cnn_width=32, enc_width=256, enc_blocks=4, k_eig=128,

@@ -213,6 +213,8 @@ def test_config_round_trip_and_unknown_keys(tmp_path):
     assert NFSConfig.preset("cpu", n_segments=6).n_segments == 6
     with pytest.raises(ValueError, match="unknown keys.*'widht'"):
         NFSConfig.from_dict({**NFSConfig().to_dict(), "widht": 3})
+    # a retired key of older checkpoints (the bundled one has n_identity) is dropped
+    assert NFSConfig.from_dict({**NFSConfig().to_dict(), "n_identity": 50}) == NFSConfig()
     with pytest.raises(ValueError, match="unknown NFSConfig preset"):
         NFSConfig.preset("huge")
     with pytest.raises(ValueError, match="use_skinning"):
