@@ -189,50 +189,66 @@ class Retargeter:
                fps: float = 30.0, progress: bool = False) -> np.ndarray:
         """Inverse rigging: frame(s) -> FACS weights (53,) or (T,53) in ICT order, clipped to [0,1].
         ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames."""
-        z = self.encode(frames, source_neutral, progress)
-        if smooth and z.ndim == 2:
-            z = smooth_codes(z, smooth, fps)
+        z = self.expression_codes(frames, source_neutral, smooth, fps, progress)
         return np.clip(z[..., :N_FACS], 0.0, 1.0).astype(np.float32)
 
     # --------------------------------------------------------------------------- decoding
-    @torch.no_grad()
     def decode(self, target, z_ge, progress: bool = False) -> np.ndarray:
         """Target vertices for expression code(s) z_GE (128,) or (T,128) -> (V,3) or (T,V,3) float64,
-        in the target's frame and units. ``progress``: a tqdm bar over frames."""
+        in the target's frame and units. ``progress``: a tqdm bar over frames. For long sequences
+        on big targets, ``iter_decode`` yields the frames one at a time instead."""
+        z = np.asarray(z_ge, np.float32)
+        frames = np.stack(list(self.iter_decode(target, z.reshape(-1, z.shape[-1]), progress)))
+        return frames[0] if z.ndim == 1 else frames
+
+    def iter_decode(self, target, z_ge, progress: bool = False):
+        """Yield the target's vertices (V,3) float64 for each code of z_GE (T,128), one frame at a
+        time: the memory of one frame whatever T (a 1M-vertex frame is 24 MB)."""
         from tqdm import tqdm
 
         target = self.prepare(target)
         z = torch.as_tensor(np.asarray(z_ge, np.float32), device=self.device)
-        single = z.dim() == 1
-        z = z.reshape(-1, z.shape[-1])
-        out = []
+        if z.dim() != 2:
+            raise RetargetError(f"iter_decode: codes must be (T, {z.shape[-1]}), got {tuple(z.shape)}")
         for zi in tqdm(z, desc="decoding", unit="frame", disable=not progress or len(z) < 2):
-            dv = self.model.decode_target(target.feat, target.c, target.codes, zi, chunk=self.chunk)
-            out.append(target.mesh.vertices
-                       + target.proxy.canon.displacement_from_canonical(dv.cpu().numpy()))
-        res = np.stack(out)
-        return res[0] if single else res
+            with torch.no_grad():
+                dv = self.model.decode_target(target.feat, target.c, target.codes, zi, chunk=self.chunk)
+            yield (target.mesh.vertices
+                   + target.proxy.canon.displacement_from_canonical(dv.cpu().numpy()))
+
+    def expression_codes(self, source, source_neutral: Mesh | None = None,
+                         smooth: str | None = None, fps: float = 30.0,
+                         progress: bool = False) -> np.ndarray:
+        """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), temporally
+        filtered when ``smooth`` is given (see ``invert``)."""
+        z = self.encode(source, source_neutral, progress)
+        if smooth and z.ndim == 2:
+            z = smooth_codes(z, smooth, fps)
+        return z
 
     def transfer(self, source, target, source_neutral: Mesh | None = None,
                  smooth: str | None = None, fps: float = 30.0, progress: bool = False) -> np.ndarray:
         """Clone the expression of source frame(s) onto a target neutral mesh (any topology).
         source: a Mesh or a list of frames -> (V_tgt,3) or (T,V_tgt,3) in the target's units."""
-        z = self.encode(source, source_neutral, progress)
-        if smooth and z.ndim == 2:
-            z = smooth_codes(z, smooth, fps)
-        return self.decode(target, z, progress)
+        return self.decode(target, self.expression_codes(source, source_neutral, smooth, fps, progress),
+                           progress)
 
     def animate(self, target, weights, progress: bool = False) -> np.ndarray:
         """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list
-        of dicts {ICT name: value} -> (V,3) or (T,V,3). z_GE = [w, 0]."""
-        w = weights_array(weights)
-        return self.decode(target, weights_to_code(torch.from_numpy(w)).numpy(), progress)
+        of dicts {ICT name: value} -> (V,3) or (T,V,3). z_GE = [w, 0] (``weight_codes``)."""
+        return self.decode(target, weight_codes(weights), progress)
 
     def bake(self, target) -> BakedRig:
         """Decode the 53 one-hot expressions once: a linear blendshape rig for the target."""
         target = self.prepare(target)
         shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
         return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
+
+
+def weight_codes(weights) -> np.ndarray:
+    """FACS weights (as ``weights_array`` takes them) -> expression codes z_GE = [w, 0], (128,) or
+    (T,128) float32: what ``Retargeter.animate`` decodes."""
+    return weights_to_code(torch.from_numpy(weights_array(weights))).numpy()
 
 
 def weights_array(weights) -> np.ndarray:

@@ -88,6 +88,9 @@ def test_transfer_animate_invert_bake_shapes(r):
     ws = r.invert(src, smooth="savgol")
     assert w.shape == (53,) and ws.shape == (3, 53) and (ws >= 0).all() and (ws <= 1).all()
     assert len(retarget.FACS_NAMES) == 53 == len(set(retarget.FACS_NAMES))
+    z = r.expression_codes(src, source_neutral=src[0])
+    streamed = list(r.iter_decode(target, z))
+    assert len(streamed) == 3 and np.allclose(np.stack(streamed), seq)   # frame by frame = batch
     named = r.animate(target, {"jawOpen": 0.7, "eyeBlink_L": 0.2})
     arr = np.zeros(53, np.float32)
     arr[retarget.FACS_NAMES.index("jawOpen")], arr[retarget.FACS_NAMES.index("eyeBlink_L")] = 0.7, 0.2

@@ -249,3 +249,31 @@ def test_failed_sequence_leaves_no_partial_folder(tmp_path, monkeypatch):
         _common.write_frames(str(tmp_path / "out"), frames, np.array([[0, 1, 2]]), [], args)
     assert not (tmp_path / "out").exists()
     assert list(tmp_path.iterdir()) == []  # staging folder removed too
+
+
+def test_a_streamed_sequence_is_written_one_frame_at_a_time(tmp_path, monkeypatch):
+    """write_frames takes an iterator (Retargeter.iter_decode): each frame is saved before the next
+    is made, and the files equal those of the same frames given as one array."""
+    import argparse
+
+    from retarget.commands import _common
+
+    args = argparse.Namespace(up=None, forward=None, format="obj")
+    frames = np.random.default_rng(0).normal(size=(4, 3, 3))
+    faces = np.array([[0, 1, 2]])
+    made, saved = [], []
+    real_save = _common.save_mesh
+    monkeypatch.setattr(_common, "save_mesh", lambda p, v, f: (saved.append(len(made)), real_save(p, v, f)))
+
+    def stream():
+        for f in frames:
+            made.append(1)
+            yield f
+
+    _common.write_frames(str(tmp_path / "streamed"), stream(), faces, [], args, n_frames=4)
+    assert saved == [1, 2, 3, 4]                 # frame t saved when t frames had been made
+    _common.write_frames(str(tmp_path / "array"), frames, faces, [], args)
+    for name in (f"frame_{t:04d}.obj" for t in range(4)):
+        assert (tmp_path / "streamed" / name).read_text() == (tmp_path / "array" / name).read_text()
+    with pytest.raises(ValueError, match="n_frames"):
+        _common.write_frames(str(tmp_path / "x"), iter(frames), faces, [], args)

@@ -65,20 +65,28 @@ def output_paths(out: str, n_frames: int, inputs: list, fmt: str = "obj") -> lis
     return paths
 
 
-def write_frames(out: str, frames: np.ndarray, faces: np.ndarray, inputs: list, args,
-                 fps: float = 30.0) -> list[Path]:
-    """Write (T,V,3) project-frame vertices in the input files' axes to OUT (see
-    :func:`output_paths`). Never overwrites an input. Files are written atomically; the frames of a
-    folder are first written to a hidden staging folder beside it and moved in only when all of them
-    are written, so an error leaves no partial sequence behind."""
-    frames = np.asarray(frames) @ rotation(args)  # back to the files' axes (R orthonormal)
-    paths = output_paths(out, len(frames), inputs, getattr(args, "format", "obj"))
+def write_frames(out: str, frames, faces: np.ndarray, inputs: list, args, fps: float = 30.0,
+                 n_frames: int | None = None) -> list[Path]:
+    """Write project-frame vertices in the input files' axes to OUT (see :func:`output_paths`).
+
+    ``frames``: a (T,V,3) array, or an iterable of (V,3) frames with ``n_frames`` = T (e.g.
+    ``Retargeter.iter_decode``), which a folder output writes one frame at a time, so a long sequence
+    on a huge target never sits in memory whole. Never overwrites an input. Files are written
+    atomically; the frames of a folder are first written to a hidden staging folder beside it and
+    moved in only when all of them are written, so an error leaves no partial sequence behind."""
+    if isinstance(frames, np.ndarray):
+        n_frames = len(frames)
+    elif n_frames is None:
+        raise ValueError("write_frames: n_frames is needed when frames is not an array")
+    rot = rotation(args)                          # back to the files' axes (R orthonormal)
+    paths = output_paths(out, n_frames, inputs, getattr(args, "format", "obj"))
     if paths[0].suffix.lower() == ".glb":
         from ..glb import write_sequence_glb
-        write_sequence_glb(paths[0], frames, faces, fps=fps)
+        write_sequence_glb(paths[0], np.stack([np.asarray(f, np.float32) for f in frames]) @ rot,
+                           faces, fps=fps)
         return paths
     if len(paths) == 1 and paths[0].parent != Path(out):
-        save_mesh(paths[0], frames[0], faces)
+        save_mesh(paths[0], np.asarray(next(iter(frames))) @ rot, faces)
         return paths
     folder = Path(out)
     try:
@@ -88,7 +96,7 @@ def write_frames(out: str, frames: np.ndarray, faces: np.ndarray, inputs: list, 
         raise RetargetError(f"{out}: cannot write the output folder ({e.strerror})") from None
     try:
         for p, f in zip(paths, frames):
-            save_mesh(staging / p.name, f, faces)
+            save_mesh(staging / p.name, np.asarray(f) @ rot, faces)
         folder.mkdir(exist_ok=True)
         for p in paths:
             os.replace(staging / p.name, p)

@@ -29,8 +29,12 @@ def run(args) -> int:
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
     r = retargeter(args)
     tgt = r.prepare(target)
+    from ..api import weight_codes
+
+    n = len(track.weights)
     verts = (r.bake(tgt).evaluate(track.weights) if args.baked
-             else r.animate(tgt, track.weights, progress=True))
-    written = write_frames(args.out, verts, target.faces, inputs, args, fps=track.fps or 30.0)
-    print(f"wrote {len(verts)} frame(s) to {written[0] if len(written) == 1 else args.out}")
+             else r.iter_decode(tgt, weight_codes(track.weights), progress=True))
+    written = write_frames(args.out, verts, target.faces, inputs, args, fps=track.fps or 30.0,
+                           n_frames=n)
+    print(f"wrote {n} frame(s) to {written[0] if len(written) == 1 else args.out}")
     return 0

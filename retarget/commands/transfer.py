@@ -32,9 +32,11 @@ def run(args) -> int:
     if args.source_neutral:
         neutral = load_mesh(args.source_neutral, up=args.up, forward=args.forward, force=args.force)
     r = retargeter(args)
-    verts = r.transfer(frames, r.prepare(target), neutral, smooth=args.smooth, fps=args.fps,
-                       progress=True)
-    written = write_frames(args.out, verts, target.faces, inputs, args, fps=args.fps)
+    tgt = r.prepare(target)
+    z = r.expression_codes(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True)
+    z = z.reshape(-1, z.shape[-1])
+    written = write_frames(args.out, r.iter_decode(tgt, z, progress=True), target.faces, inputs,
+                           args, fps=args.fps, n_frames=len(z))
     print(f"wrote {len(frames)} frame(s) on {target.n_vertices} target vertices to "
           f"{written[0] if len(written) == 1 else args.out}")
     return 0
