@@ -47,7 +47,7 @@ DEFAULTS = {
         "rig": None, "keep_vertices": None, "rig_mix": 0.5,
     },
     "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,
-             "bp": 1.0, "br": 1.0, "nll": 1.0},
+             "bp": 1.0, "br": 1.0, "nll": 1.0, "free_dims_dropout": 0.0},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
     "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
               "ckpt_minutes": 5.0},
@@ -131,6 +131,18 @@ def face_subset(faces: np.ndarray, n_faces: int, rng: np.random.Generator):
     return rows, inverse.reshape(-1, 3)
 
 
+def free_dims_dropout(z_ge: torch.Tensor, n_facs: int, p: float, rng: np.random.Generator):
+    """z_GE (S, D) for L_dec with, for each source with probability ``p``, the dims past the FACS
+    weights set to 0: the decoder then also learns from codes shaped like z_GE = [w, 0], what
+    driving from FACS weights (``Retargeter.animate``, the baked rig) feeds it. p = 0: unchanged."""
+    if p <= 0:
+        return z_ge
+    drop = torch.from_numpy(rng.random(z_ge.shape[0]) < p).to(z_ge.device)
+    keep = torch.ones_like(z_ge)
+    keep[:, n_facs:] = (~drop).to(z_ge.dtype)[:, None]
+    return z_ge * keep
+
+
 #: The encoder and segmentation terms added to L_dec, in this order, with their config weights.
 LOSS_WEIGHTS = (("L_ID", "id"), ("L_Exp", "exp"), ("L_BP", "bp"), ("L_BR", "br"), ("L_nll", "nll"))
 
@@ -165,7 +177,9 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
     rows = torch.from_numpy(rows_np).to(device)
     sub_faces = torch.from_numpy(sub_faces_np).to(device)
     rest = t_feat[rows, :3]
-    dv = model.decode_target(t_feat, c_t, codes, z_ge, rows)                        # (S, n, 3)
+    dv = model.decode_target(t_feat, c_t, codes, free_dims_dropout(z_ge, model.cfg.n_facs,
+                                                                    loss_cfg["free_dims_dropout"], rng),
+                             rows)                                                 # (S, n, 3)
     gt = torch.from_numpy(group.gt_dv).to(device)[:, rows]
     out = L.decoder_loss(rest + dv, rest + gt, rest, sub_faces, loss_cfg["lambda_v"],
                          loss_cfg["lambda_n"], loss_cfg["lambda_g"])

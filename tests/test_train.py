@@ -200,11 +200,28 @@ def test_train_command_overrides_the_step_and_time_budget():
     train_cmd.add_arguments(p)
     cfg, _ = train_cmd.training_config(p.parse_args(
         ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--steps", "1500",
-         "--max-minutes", "0"]))
+         "--max-minutes", "0", "--lr", "2e-4"]))
     assert cfg["train"]["steps"] == 1500 and cfg["train"]["max_minutes"] == 0
+    assert cfg["optim"]["lr"] == 2e-4
     cfg, _ = train_cmd.training_config(p.parse_args(
         ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x"]))
     assert cfg["train"]["max_minutes"] == 60
+    with pytest.raises(RetargetError, match="--lr"):
+        train_cmd.training_config(p.parse_args(
+            ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--lr", "0"]))
     with pytest.raises(RetargetError, match="--max-minutes"):
         train_cmd.training_config(p.parse_args(
             ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--max-minutes", "-1"]))
+
+
+def test_free_dims_dropout_zeroes_the_dims_past_the_weights_of_some_sources():
+    from retarget.train import free_dims_dropout
+    z = torch.rand(400, 128, requires_grad=True)
+    assert free_dims_dropout(z, 53, 0.0, np.random.default_rng(0)) is z
+    out = free_dims_dropout(z, 53, 0.5, np.random.default_rng(0))
+    dropped = (out[:, 53:] == 0).all(1)
+    assert torch.equal(out[:, :53], z[:, :53]) and 120 < int(dropped.sum()) < 280
+    assert torch.equal(out[~dropped], z[~dropped])
+    out.sum().backward()                      # the weights keep their gradient in every source
+    assert (z.grad[:, :53] == 1).all() and (z.grad[dropped, 53:] == 0).all()
+    assert (free_dims_dropout(z, 53, 1.0, np.random.default_rng(1))[:, 53:] == 0).all()

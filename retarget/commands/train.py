@@ -28,6 +28,7 @@ def add_arguments(p):
     p.add_argument("--rig-mix", type=float,
                    help="fraction of steps drawn from the rig, the rest procedural (default 0.5)")
     p.add_argument("--steps", type=int, help="override train.steps")
+    p.add_argument("--lr", type=float, help="override optim.lr (the peak learning rate)")
     p.add_argument("--max-minutes", type=float,
                    help="override train.max_minutes (0 = no time limit: the budget and the "
                         "learning-rate schedule follow --steps only, whatever else runs on the "
@@ -37,7 +38,7 @@ def add_arguments(p):
 
 def training_config(args) -> tuple[dict, str]:
     """(config, its path) from the arguments: --config, or with --rig the fine-tuning config whose
-    model is the --init checkpoint's; --rig, --keep-vertices, --rig-mix, --steps and --max-minutes applied."""
+    model is the --init checkpoint's; --rig, --keep-vertices, --rig-mix, --steps, --lr and --max-minutes applied."""
     from ..config import find_config
     from ..errors import RetargetError
     from ..train import load_checkpoint, load_config
@@ -62,6 +63,10 @@ def training_config(args) -> tuple[dict, str]:
         cfg["data"]["rig_mix"] = args.rig_mix
     if args.steps is not None:
         cfg["train"]["steps"] = args.steps
+    if args.lr is not None:
+        if not args.lr > 0:
+            raise RetargetError(f"--lr must be > 0, got {args.lr}")
+        cfg["optim"]["lr"] = args.lr
     if args.max_minutes is not None:
         if args.max_minutes < 0:
             raise RetargetError(f"--max-minutes must be >= 0, got {args.max_minutes}")
