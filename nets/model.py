@@ -236,10 +236,14 @@ class NFSModel(nn.Module):
         if feat.dim() != 2 or feat.shape[1] != VERTEX_FEATURE_DIM:
             raise ValueError(f"vertex features must be (V, {VERTEX_FEATURE_DIM}); got "
                              f"{tuple(feat.shape)}")
+        self._check_image_code(c)
+        return torch.cat([feat, c.expand(feat.shape[0], -1)], dim=1)
+
+    def _check_image_code(self, c: torch.Tensor) -> None:
+        """ValueError unless c is one image code (image_code_dim,)."""
         if c.shape != (self.cfg.image_code_dim,):
             raise ValueError(f"image code c must be ({self.cfg.image_code_dim},); got "
                              f"{tuple(c.shape)} (use image_code(img)[0] for one image)")
-        return torch.cat([feat, c.expand(feat.shape[0], -1)], dim=1)
 
     def encode_identity(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
         """Identity encoder on a neutral mesh -> z_ID (code_dim,) (area-weighted vertex mean)."""
@@ -330,9 +334,7 @@ class NFSModel(nn.Module):
                 or (not per_frame and z_codes.shape[1] != n)):
             raise ValueError(f"decode_many: z_id must be ({d},) and z_codes (S, {n}, {d}) or "
                              f"(S, {d}); got {tuple(z_id.shape)} and {tuple(z_codes.shape)}")
-        if c.shape != (self.cfg.image_code_dim,):
-            raise ValueError(f"image code c must be ({self.cfg.image_code_dim},); got "
-                             f"{tuple(c.shape)} (use image_code(img)[0] for one image)")
+        self._check_image_code(c)
         first, rest = self.decoder[0], self.decoder[1:]
         w_v, w_const, w_code = first.weight.split(
             [VERTEX_FEATURE_DIM, first.in_features - VERTEX_FEATURE_DIM - d, d], dim=1)
