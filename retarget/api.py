@@ -174,14 +174,16 @@ class Retargeter:
             return mesh if cluster is None else Mesh(cluster_means(mesh.vertices, cluster), faces, mesh.name)
 
         base = self._prepare(proxy(ref))
+        ops_t = base.torch_ops(self.device)   # the frames share these: converted once, not per frame
         codes = []
         for f in tqdm(frames, desc="encoding", unit="frame", disable=not progress or len(frames) < 2):
             if f.n_vertices != ref.n_vertices:
                 raise RetargetError(f"{f.name or 'frame'}: {f.n_vertices} vertices, but the source has "
                                     f"{ref.n_vertices} ({ref.name or 'first frame'})")
             p = self._prepare(proxy(f), canon=base.canon, ops=base.ops)
-            feat, img, ops = p.torch_inputs(self.device)
-            codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], ops))
+            feat = torch.from_numpy(p.feat).to(self.device)
+            img = torch.from_numpy(p.image)[None].to(self.device)
+            codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], ops_t))
         out = torch.stack(codes).cpu().numpy()
         return out[0] if single else out
 
