@@ -103,6 +103,14 @@ def init_distributed(device: torch.device) -> tuple[int, int]:
     return (dist.get_rank(), world) if world > 1 else (0, 1)
 
 
+def shutdown_distributed() -> None:
+    """Leave the process group, if one was joined: a barrier first, so that no rank tears down its
+    connections while another is still communicating (gloo aborts the process when it does)."""
+    if dist.is_available() and dist.is_initialized():
+        dist.barrier()
+        dist.destroy_process_group()
+
+
 def average_gradients(model: torch.nn.Module, world: int) -> None:
     """All-reduce (mean) every gradient across processes in one flat buffer."""
     if world == 1:
@@ -333,7 +341,10 @@ class Trainer:
                    desc="train", dynamic_ncols=True)
         running: dict[str, float] = {}
         try:
-            while self.step < min(total_steps, stop_at or total_steps) and not self._stop:
+            while self.step < min(total_steps, stop_at or total_steps):
+                self._agree_on_clock_and_stop()
+                if self._stop:
+                    break
                 if tcfg["max_minutes"] and self.elapsed >= 60 * tcfg["max_minutes"]:
                     break
                 t0 = time.monotonic()
@@ -388,6 +399,17 @@ class Trainer:
         if tcfg["max_minutes"]:
             done = max(done, self.elapsed / (60.0 * tcfg["max_minutes"]))
         return done
+
+    def _agree_on_clock_and_stop(self) -> None:
+        """Under torchrun every rank takes the slowest rank's training time and stops when any rank
+        was asked to: the learning-rate schedule (which may follow the clock), the time budget and
+        Ctrl-C then act on all ranks at the same step, and their parameters stay identical."""
+        if self.world == 1:
+            return
+        flags = torch.tensor([self.elapsed, float(self._stop)], dtype=torch.float64,
+                             device=self.device)
+        dist.all_reduce(flags, op=dist.ReduceOp.MAX)
+        self.elapsed, self._stop = float(flags[0]), bool(flags[1])
 
     def _request_stop(self, signum, frame):
         """Ctrl-C: finish the current step, save, exit cleanly."""

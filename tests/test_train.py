@@ -112,12 +112,13 @@ def test_tampered_checkpoint_is_refused(tmp_path):
 def test_two_gloo_processes_keep_identical_parameters(tmp_path):
     script = tmp_path / "ddp.py"
     script.write_text(f"""
-import sys, torch, torch.distributed as dist
+import os, sys, torch, torch.distributed as dist
 sys.path.insert(0, {str(ROOT)!r})
-from retarget.train import Trainer, load_config
-cfg = load_config({str(TINY)!r}); cfg["train"]["steps"] = 2; cfg["train"]["val_every"] = 100
+from retarget.train import Trainer, load_config, shutdown_distributed
+cfg = load_config({str(TINY)!r}); cfg["train"].update(steps=10000, val_every=100000, max_minutes=0.5)
+cfg["optim"]["warmup_steps"] = 0  # the learning rate follows the clock from the first step
 t = Trainer(cfg, {str(tmp_path / 'run')!r}, progress=False)
-t.run()
+t.run(stop_at=3)
 flat = torch.cat([p.detach().reshape(-1) for p in t.model.parameters()])
 out = [torch.zeros_like(flat) for _ in range(2)]
 dist.all_gather(out, flat)
@@ -125,11 +126,13 @@ assert torch.equal(out[0], out[1]), "parameters diverged"
 start = torch.cat([p.reshape(-1) for p in Trainer(cfg, {str(tmp_path / 'other')!r}, progress=False).model.parameters()])
 assert not torch.equal(start, flat), "no training happened"
 open({str(tmp_path)!r} + f"/rank{{dist.get_rank()}}.ok", "w").write("ok")
-dist.destroy_process_group()
+shutdown_distributed()
+sys.stdout.flush(); sys.stderr.flush()
+os._exit(0)  # skip interpreter finalisation, where gloo's worker threads can abort the process
 """)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    res = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2",
-                          "--master_port", "29517", str(script)], capture_output=True, text=True,
+    res = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone",
+                          "--nproc_per_node", "2", str(script)], capture_output=True, text=True,
                          env=env, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     # each rank leaves a marker file (their stdout lines can interleave)

@@ -76,7 +76,7 @@ def training_config(args) -> tuple[dict, str]:
 
 def run(args) -> int:
     from ..errors import RetargetError
-    from ..train import Trainer
+    from ..train import Trainer, shutdown_distributed
 
     cfg, config_path = training_config(args)
     out = Path(args.out)
@@ -88,6 +88,7 @@ def run(args) -> int:
     if args.resume and trainer.resume():
         print(f"resumed {out / 'last.pt'} at step {trainer.step}")
     metrics = trainer.run()
+    shutdown_distributed()
     if trainer.rank == 0:
         print(f"saved {out / 'model.pt'} (step {trainer.step})"
               + "".join(f", {k} {v:.4f}" for k, v in metrics.items()))
