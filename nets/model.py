@@ -24,6 +24,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any, Sequence
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -415,3 +416,68 @@ class NFSModel(nn.Module):
     def _require_skinning(self):
         if not self.cfg.use_skinning:
             raise ValueError("this NFSModel was built with use_skinning=False (no skinning encoder)")
+
+
+# ------------------------------------------------------------------------------------ benchmark
+def benchmark_presets(presets: Sequence[str] = ("tiny", "cpu", "paper"),
+                      sizes: Sequence[int] = (2000, 11000), repeats: int = 5) -> list[dict]:
+    """Parameter count and the cost of one training sample for each preset and target size.
+
+    One sample = one source and one target neutral (a wavy height field of about V vertices each,
+    the same mesh for both), every target vertex decoded: image codes, the three encoders, the
+    skinning block and the decoder forward, a squared-error loss on Δv, backward. Operators are
+    computed beforehand (they are cached in training). Returns one dict per (preset, size):
+    preset, n_params, n_vertices, forward_ms, backward_ms (medians over ``repeats`` runs after one
+    warm-up run, on the current torch thread count, CPU).
+    """
+    import statistics
+    import time
+
+    from .geometry import _bumpy_grid, compute_operators, vertex_normals
+
+    results = []
+    for preset in presets:
+        cfg = NFSConfig.preset(preset)
+        torch.manual_seed(0)
+        model = NFSModel(cfg)
+        n_params = sum(p.numel() for p in model.parameters())
+        for size in sizes:
+            verts, faces = _bumpy_grid(size)
+            ops = compute_operators(verts, faces, k=cfg.k_eig).to_torch()
+            feat = torch.tensor(np.concatenate([verts, vertex_normals(verts, faces)], 1),
+                                dtype=torch.float32)
+            img = torch.rand(2, cfg.image_channels, cfg.image_size, cfg.image_size,
+                             generator=torch.Generator().manual_seed(0))
+            fwd, bwd = [], []
+            for _ in range(repeats + 1):
+                model.zero_grad(set_to_none=True)
+                t0 = time.perf_counter()
+                c_src, c_tgt = model.image_code(img)
+                dv = model.forward_pair(feat, c_src, ops, feat, c_tgt, ops)["dv"]
+                loss = dv.square().mean()
+                t1 = time.perf_counter()
+                loss.backward()
+                t2 = time.perf_counter()
+                fwd.append(t1 - t0)
+                bwd.append(t2 - t1)
+            results.append(dict(preset=preset, n_params=n_params, n_vertices=len(verts),
+                                forward_ms=1000 * statistics.median(fwd[1:]),
+                                backward_ms=1000 * statistics.median(bwd[1:])))
+    return results
+
+
+if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser(description="Parameters and per-sample training cost of the "
+                                                 "NFSConfig presets (CPU).")
+    parser.add_argument("--presets", nargs="+", default=["tiny", "cpu", "paper"])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[2000, 11000])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
+    print("| preset | parameters | target vertices | forward (ms) | backward (ms) |")
+    print("| --- | ---: | ---: | ---: | ---: |")
+    for r in benchmark_presets(args.presets, args.sizes, args.repeats):
+        print(f"| {r['preset']} | {r['n_params']:,} | {r['n_vertices']:,} | {r['forward_ms']:.1f} "
+              f"| {r['backward_ms']:.1f} |")

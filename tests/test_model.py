@@ -261,3 +261,11 @@ def test_row_group_norm_equals_group_norm_forward_and_backward():
         torch.testing.assert_close(a, b, rtol=1e-3, atol=1e-4)
     img = torch.randn(2, 32, 5, 5)                # the CNN's 4D inputs take nn.GroupNorm's path
     torch.testing.assert_close(fast(img), ref(img))
+
+
+def test_preset_benchmark_reports_each_preset_and_size():
+    from nets.model import benchmark_presets
+    rows = benchmark_presets(["tiny"], [200, 400], repeats=1)
+    assert [(r["preset"], r["n_vertices"]) for r in rows] == [("tiny", 196), ("tiny", 400)]
+    assert rows[0]["n_params"] == sum(p.numel() for p in tiny_model().parameters())
+    assert all(r["forward_ms"] > 0 and r["backward_ms"] > 0 for r in rows)
