@@ -31,6 +31,7 @@ from torch import nn
 from .cnn import FrontalCNN, group_norm
 from .diffusion_net import DiffusionNet
 
+CANONICAL_FRAMES = ("bbox", "face")   # NFSConfig.canonical (retarget.canonical.FRAMES)
 VERTEX_FEATURE_DIM = 6  # canonical position (3) + unit vertex normal (3)
 
 
@@ -57,6 +58,8 @@ class NFSConfig:
         norm_groups: GroupNorm groups in the decoder and the CNN.
         use_skinning: False = the "without skinning encoder" ablation (NFR-like): no skinning
             encoder or block, the decoder takes z_GE broadcast to every vertex.
+        canonical: the canonical frame the model was trained in (``retarget.canonical``):
+            "bbox" (bounding box; every checkpoint without the key) or "face" (fitted to the face).
     """
 
     code_dim: int = 128
@@ -76,19 +79,24 @@ class NFSConfig:
     decoder_layers: int = 8
     norm_groups: int = 8
     use_skinning: bool = True
+    canonical: str = "bbox"
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if f.type == "bool":
                 ok = isinstance(value, bool)
+            elif f.type == "str":
+                ok = value in CANONICAL_FRAMES
             elif f.type == "float":
                 ok = isinstance(value, (int, float)) and not isinstance(value, bool)
             else:
                 ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
             if not ok:
                 raise ValueError(f"NFSConfig.{f.name}: expected a {f.type}"
-                                 f"{' >= 1' if f.type == 'int' else ''}, got {value!r}")
+                                 f"{' >= 1' if f.type == 'int' else ''}"
+                                 f"{' in ' + str(CANONICAL_FRAMES) if f.type == 'str' else ''}, "
+                                 f"got {value!r}")
         if self.n_facs > self.code_dim:
             raise ValueError(f"NFSConfig: n_facs ({self.n_facs}) must not exceed code_dim "
                              f"({self.code_dim})")

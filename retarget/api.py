@@ -126,7 +126,7 @@ class Retargeter:
     def _prepare(self, mesh: Mesh, canon=None, ops=None) -> PreparedMesh:
         return prepare_mesh(mesh.vertices, mesh.faces, self.cfg.k_eig, self.cfg.image_size,
                             IMAGE_CHANNELS[self.cfg.image_channels], canon=canon, ops=ops,
-                            cache_dir=self.cache_dir)
+                            cache_dir=self.cache_dir, canonical=self.cfg.canonical)
 
     @torch.no_grad()
     def prepare(self, mesh: Mesh) -> Target:
@@ -134,7 +134,8 @@ class Retargeter:
         if isinstance(mesh, Target):
             return mesh
         check_head_like(mesh, "target")
-        canon = Canonicaliser.fit(mesh.vertices, name=mesh.name or "target")
+        canon = Canonicaliser.fit(mesh.vertices, name=mesh.name or "target",
+                                  kind=self.cfg.canonical, faces=mesh.faces)
         if mesh.n_vertices > self.proxy_vertices:
             (pv, pf), cluster = cluster_decimate(mesh.vertices, mesh.faces, self.proxy_vertices)
             proxy = self._prepare(Mesh(pv, pf, mesh.name), canon=canon)

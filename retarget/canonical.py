@@ -1,15 +1,23 @@
 """Canonicalisation: the network sees every mesh centred and at one size, whatever its units.
 
-The canonical frame puts the centre of the mesh's axis-aligned bounding box at the origin and scales
-the mesh uniformly so its width (x extent, ear to ear) is ``CANONICAL_WIDTH`` = 16 canonical units,
-about the width of a real head in centimetres (the unit of the synthetic training rigs). Axes are
-not changed (the input must already be +y up, +z forward; see ``retarget.io.axis_rotation``).
+Two frames (the kind is recorded per model: ``nets.model.NFSConfig.canonical``):
 
-Network outputs (positions or displacements in canonical units) are mapped back to the input's
-frame and units with :meth:`Canonicaliser.from_canonical` / :meth:`displacement_from_canonical`.
-Hence a head given in metres, centimetres or millimetres yields the same expression, in its own
-units: the result for the millimetre head is the centimetre result times ten. This is the
-robustness to scale and translation that NFS lacks (paper Fig. 11).
+- ``"bbox"`` (every checkpoint trained before the face frame, and the default): the centre of the
+  mesh's axis-aligned bounding box goes to the origin and the mesh is scaled uniformly so its width
+  (x extent, ear to ear) is ``CANONICAL_WIDTH`` = 16 canonical units, about the width of a real head
+  in centimetres (the unit of the synthetic training rigs). It depends on the crop: a bust with
+  shoulders comes out at a third of the size of the same head cut at the neck.
+- ``"face"``: fitted to the front of the face, so a face mask, a head, a head with eye sockets and
+  mouth cavity, and a bust give one frame (see :func:`fit_face_frame`). Its constants are set so
+  that on the mean procedural head it is close to the bounding-box frame (``FACE_BAND_CANONICAL``,
+  ``FACE_POINT_CANONICAL``).
+
+Axes are not changed (the input must already be +y up, +z forward; see
+``retarget.io.axis_rotation``). Network outputs (positions or displacements in canonical units) are
+mapped back to the input's frame and units with :meth:`Canonicaliser.from_canonical` /
+:meth:`displacement_from_canonical`. Hence a head given in metres, centimetres or millimetres yields
+the same expression, in its own units: the result for the millimetre head is the centimetre result
+times ten. This is the robustness to scale and translation that NFS lacks (paper Fig. 11).
 """
 from __future__ import annotations
 
@@ -20,30 +28,67 @@ import numpy as np
 from .errors import RetargetError
 
 CANONICAL_WIDTH = 16.0
+FRAMES = ("bbox", "face")
+
+# ---- the face frame (fit_face_frame); lengths relative to the mesh's own size
+HEAD_WINDOW_GAIN = 1.3    # head window depth below the top = gain × the window's x extent
+GRID_CELLS = 96            # height-field cells along the head window's depth
+SAMPLE_SPACING = 0.5      # triangle samples per height-field cell side: spacing = 0.5 cell
+FRONT_COS = 0.5           # the face front: surface normals within 60° of +z (cos 60° = 0.5) ...
+JUMP_CELLS = 4.0          # ... and no step in the height field above 4 cells between neighbours
+SEED_RADIUS = 0.1         # components of the face front reaching this fraction of the window
+                          # depth around the nose tip make the face (the nose alone may be cut off)
+#: Canonical width of the face front (the scale) and canonical position of the face point (the
+#: nose tip, at the front's mid x): chosen so the face frame of procedural full heads is within a
+#: few per cent of their bounding-box frame.
+FACE_WIDTH_CANONICAL = 11.5
+FACE_POINT_CANONICAL = np.array([0.0, 1.1, 10.3])
+#: The frontal render of a face-frame model frames this canonical box ([min, max], (2,3)) instead
+#: of each mesh's bounding box, so the image follows the face frame whatever the crop.
+FACE_RENDER_BOX = np.array([[-10.0, -15.0, -13.0], [10.0, 16.0, 12.0]])
 
 
 @dataclass(frozen=True)
 class Canonicaliser:
     """Similarity (translation + uniform scale) from a mesh's frame to the canonical frame.
 
-    centre: (3,) float64 bounding-box centre, input units. scale: canonical units per input unit.
+    centre: (3,) float64, input units: the point that goes to the canonical origin. scale: canonical
+    units per input unit. kind: "bbox" or "face" (how it was fitted).
     canonical = (points − centre) · scale.
     """
 
     centre: np.ndarray
     scale: float
+    kind: str = "bbox"
 
     @classmethod
-    def fit(cls, vertices, name: str = "mesh") -> "Canonicaliser":
-        """Fit to vertices (V,3): bounding-box centre, and scale making the x extent 16 units.
-        RetargetError (naming ``name``) for a mesh with no width."""
+    def fit(cls, vertices, name: str = "mesh", kind: str = "bbox", faces=None) -> "Canonicaliser":
+        """Fit to vertices (V,3) (faces (F,3) int: needed by the "face" kind).
+
+        "bbox": bounding-box centre, and scale making the x extent 16 units. "face": see
+        :func:`fit_face_frame`. RetargetError (naming ``name``) for a mesh with no width."""
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         lo, hi = v.min(axis=0), v.max(axis=0)
         width = float(hi[0] - lo[0])
         if not np.isfinite(width) or width <= 1e-12 * max(1.0, float(np.abs(v).max())):
             raise RetargetError(f"{name}: has no width along x (extent {width:g}); "
                                 "is it a face mesh in the +y up, +z forward frame?")
-        return cls(centre=0.5 * (lo + hi), scale=CANONICAL_WIDTH / width)
+        if kind == "bbox":
+            return cls(centre=0.5 * (lo + hi), scale=CANONICAL_WIDTH / width)
+        if kind == "face":
+            if faces is None:
+                raise ValueError("Canonicaliser.fit(kind='face') needs the faces")
+            point, face_width = fit_face_frame(v, faces)
+            scale = FACE_WIDTH_CANONICAL / face_width
+            return cls(centre=point - FACE_POINT_CANONICAL / scale, scale=scale, kind="face")
+        raise ValueError(f"unknown canonical frame {kind!r}; choose from {FRAMES}")
+
+    @property
+    def render_fit(self):
+        """What ``retarget.render`` frames for the frontal image of a mesh in this canonical frame:
+        True (each mesh's bounding box) for "bbox", the fixed canonical ``FACE_RENDER_BOX`` for
+        "face"."""
+        return True if self.kind == "bbox" else FACE_RENDER_BOX
 
     def to_canonical(self, points) -> np.ndarray:
         """(..., 3) points in input units -> (..., 3) float64 canonical."""
@@ -60,3 +105,126 @@ class Canonicaliser:
     def displacement_to_canonical(self, d) -> np.ndarray:
         """(..., 3) displacements in input units -> (..., 3) float64 canonical (scale only)."""
         return np.asarray(d, dtype=np.float64) * self.scale
+
+
+# ------------------------------------------------------------------------------------- face frame
+def head_window_depth(vertices: np.ndarray) -> float:
+    """Depth d below the mesh's top (max y) of the head window: the least d with
+    d = HEAD_WINDOW_GAIN × (x extent of the vertices less than d below the top).
+
+    Growing the window from the top, the head widens faster than the window deepens until the ears;
+    then the x extent stops growing and the window stops about one head width below the crown, above
+    the shoulders of a bust. vertices (V,3) float64 -> d in their units."""
+    order = np.argsort(-vertices[:, 1], kind="stable")
+    depth = vertices[order, 1]
+    depth = depth[0] - depth                                     # ascending
+    x = vertices[order, 0]
+    ext = np.maximum.accumulate(x) - np.minimum.accumulate(x)   # extent of the first i+1 vertices
+    nxt = np.append(depth[1:], np.inf)
+    want = HEAD_WINDOW_GAIN * ext
+    i = int(np.flatnonzero((ext > 0) & (want < nxt))[0])         # K·E(d) − d first ≤ 0 here
+    return float(max(want[i], depth[i]))
+
+
+def surface_samples(vertices: np.ndarray, faces: np.ndarray,
+                    spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the triangles (F,3) of vertices (V,3), at most about ``spacing`` apart in x and y:
+    each triangle's barycentric lattice of n = ceil(longest xy edge / spacing) steps (capped at 64).
+    Returns (points (N,3) float64, |n_z| (N,) of the unit normal of each point's triangle)."""
+    tri = vertices[faces]                                        # (F,3,3)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nz = np.abs(normal[:, 2]) / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)
+    edge = np.linalg.norm((tri - tri[:, [1, 2, 0]])[..., :2], axis=-1).max(axis=1)
+    n = np.clip(np.ceil(edge / spacing), 1, 64).astype(np.int64)
+    points, nzs = [], []
+    for k in np.unique(n):
+        i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+        keep = (i + j) <= k
+        bary = np.stack([k - i[keep] - j[keep], i[keep], j[keep]], axis=1) / k   # (P,3)
+        points.append(np.einsum("pc,fcd->fpd", bary, tri[n == k]).reshape(-1, 3))
+        nzs.append(np.repeat(nz[n == k], len(bary)))
+    return np.concatenate(points), np.concatenate(nzs)
+
+
+def front_height_field(points: np.ndarray, nz: np.ndarray, lo: np.ndarray, cell: float,
+                       shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The front surface seen along −z on a grid: cell (i, j) covers x = lo[0] + i·cell,
+    y = lo[1] + j·cell. points (N,3), nz (N,) from :func:`surface_samples`.
+    Returns (height (H,W): max z, −inf where empty; front_nz (H,W): |n_z| there, 0 where empty)."""
+    ij = np.floor((points[:, :2] - lo) / cell).astype(np.int64)
+    ok = ((ij >= 0) & (ij < np.array(shape))).all(axis=1)
+    key = ij[ok, 0] * shape[1] + ij[ok, 1]
+    z, nz = points[ok, 2], nz[ok]
+    order = np.lexsort((z, key))
+    last = np.append(key[order][1:] != key[order][:-1], True)      # the front-most sample per cell
+    height = np.full(shape[0] * shape[1], -np.inf)
+    front_nz = np.zeros(shape[0] * shape[1])
+    height[key[order][last]] = z[order][last]
+    front_nz[key[order][last]] = nz[order][last]
+    return height.reshape(shape), front_nz.reshape(shape)
+
+
+def face_front(height: np.ndarray, front_nz: np.ndarray, cell: float) -> np.ndarray:
+    """Component labels (H,W) int of the face-front graph: cells whose surface faces forward
+    (|n_z| > FRONT_COS), joined to their 4-neighbours where the height field has no step above
+    JUMP_CELLS cells (a silhouette or an occlusion, such as the chin over the neck). −1 = not front."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    front = front_nz > FRONT_COS
+    index = np.arange(height.size).reshape(height.shape)
+    rows, cols = [], []
+    for a, b in (((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
+                 ((slice(None), slice(None, -1)), (slice(None), slice(1, None)))):
+        ok = front[a] & front[b] & (np.abs(np.subtract(height[a], height[b], where=front[a] & front[b], out=np.full(front[a].shape, np.inf))) <= JUMP_CELLS * cell)
+        rows.append(index[a][ok])
+        cols.append(index[b][ok])
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    graph = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(height.size,) * 2)
+    labels = connected_components(graph, directed=False)[1].reshape(height.shape)
+    return np.where(front, labels, -1)
+
+
+def fit_face_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
+    """The face's reference point and width, from the front of the face.
+
+    1. The head window (:func:`head_window_depth`): the top of the mesh down to about one head width;
+       the nose tip is its front-most point (a bust's chest, as far forward, is below it).
+    2. The height field of the front surface around the tip (:func:`front_height_field`; triangles
+       sampled densely, so any tessellation gives the same field and hidden parts, such as eye
+       sockets and a mouth cavity, do not count).
+    3. The face front (:func:`face_front`): the forward-facing surface connected to the nose tip
+       without crossing a silhouette; it ends where the cheeks and temples turn sideways, under the
+       chin and up the forehead, so the neck, the ears and a bust's chest are not part of it, and a
+       face mask that keeps the cheeks has all of it. Its width (x extent) is the face's size.
+
+    vertices (V,3) float64 (+y up, +z forward, any units), faces (F,3) int.
+    Returns (point (3,): the front's mid x, the nose tip's y and z; the front's width), input units.
+    """
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    d = head_window_depth(vertices)
+    top = vertices[:, 1].max()
+    in_window = vertices[:, 1] >= top - d
+    tip = vertices[in_window][np.argmax(vertices[in_window, 2])]
+    cell = d / GRID_CELLS
+    half = 0.8 * d                                              # region of interest around the tip
+    lo = tip[:2] - half
+    shape = (int(np.ceil(2 * half / cell)),) * 2
+    tri = vertices[faces]
+    near = ((tri[..., :2] >= lo - cell) & (tri[..., :2] <= lo + 2 * half + cell)).all(-1).any(-1)
+    near &= tri[..., 2].max(axis=1) >= tip[2] - 0.6 * d
+    height, front_nz = front_height_field(*surface_samples(vertices, faces[near],
+                                                           SAMPLE_SPACING * cell), lo, cell, shape)
+    rows_y = lo[1] + (np.arange(shape[1]) + 0.5) * cell
+    seed = np.unravel_index(np.argmax(np.where(rows_y >= top - d, height, -np.inf)), shape)
+    labels = face_front(height, front_nz, cell)
+    gi, gj = np.ogrid[:shape[0], :shape[1]]
+    near_tip = (gi - seed[0]) ** 2 + (gj - seed[1]) ** 2 <= (SEED_RADIUS * d / cell) ** 2
+    touching = np.unique(labels[near_tip & (labels >= 0)])
+    if len(touching) == 0:
+        raise RetargetError("no surface faces forward around the front-most point; is the mesh "
+                            "a face in the +y up, +z forward frame?")
+    ii = np.nonzero(np.isin(labels, touching))[0]
+    x_mid = lo[0] + 0.5 * (ii.max() + ii.min() + 1) * cell
+    return (np.array([x_mid, lo[1] + (seed[1] + 0.5) * cell, height[seed]]),
+            float((ii.max() - ii.min() + 1) * cell))

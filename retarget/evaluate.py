@@ -20,12 +20,29 @@ number below has exact ground truth unless a table says otherwise:
   real → procedural (GT = the other rig driven by the same FACS weights: *semantic*, not exact,
   because two artists' shapes of one name differ), per ARKit shape (one-hot) and on sampled weights.
 
+- ``frame``: no method, the canonical frames themselves (``retarget.canonical``): the MakeHuman head
+  of ``data_synth/makehuman/data`` as face mask, head, head with eye sockets and mouth cavity, and
+  bust (:func:`makehuman_crops`), and each test identity's procedural full head against its face
+  crop: the scale of each crop relative to the reference and how far its canonical origin moves
+  (mm), for the bounding-box and the face frame.
+
 Every transfer suite also reports the segment-averaged MSE of NFS Table 1 (mean over the L = 20
 segments of each segment's MSE) and the per-segment MSE. Errors are in mm² (``retarget.metrics``).
 
-Methods are rows: one per checkpoint (the model and its ablations) and the classical oracle,
-displacement transfer through the known (u, v) correspondence (``retarget.oracle``), which needs
-(u, v) on both meshes and so has no real-rig or inverse-rigging numbers.
+Methods are rows: one per checkpoint (the model and its ablations) and three baselines that depend
+only on the eval config:
+
+- ``do nothing``: the target left neutral (inverse rigging: weights 0, re-applied to the rig), in
+  every suite. Every error is also given as a ratio to the do-nothing error of the same cases
+  (``ratios`` of each suite; jitter has none, doing nothing does not move);
+- ``closest point``: each target vertex takes the displacement of the nearest source vertex once
+  both neutrals are canonicalised in the face frame (``retarget.oracle.closest_point_transfer``).
+  Every suite gives it the source rig's neutral, as the network gets it (``source_neutral``); it
+  has no inverse-rigging or weight-driven (animate) numbers. It is exact on self-retargeting (one
+  mesh) by construction, and the peer to beat across identities and topologies;
+- ``oracle (u,v)``: displacement transfer through the known (u, v) correspondence
+  (``retarget.oracle``), which needs (u, v) on both meshes and so has no real-rig, inverse-rigging
+  or animate numbers.
 """
 from __future__ import annotations
 
@@ -44,18 +61,24 @@ from data_synth.rig import build_rig
 from data_synth.sampling import sample_weights, smooth_sequence
 from data_synth.tessellate import tessellate
 
+from .canonical import FRAMES, Canonicaliser
 from .config import configs_dir, find_config, merge, read_yaml
 from .errors import RetargetError
 from .mesh import Mesh
 from .metrics import segment_mse_mm2, second_difference_jitter_mm, squared_errors_mm2, weight_mae
-from .oracle import displacement_transfer, uv_transfer_matrix
+from .oracle import closest_point_transfer, displacement_transfer, uv_transfer_matrix
 from .smoothing import FILTERS, smooth_codes
 
 #: Suite names; a suite's index seeds its weights, so new suites go at the end.
-SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig", "animate")
+SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig", "animate",
+          "frame")
 TRANSFER_SUITES = ("self", "cross_identity", "cross_topology")
 REPO_ROOT = Path(__file__).resolve().parents[1]
 ORACLE_NAME = "oracle (u,v)"
+DO_NOTHING_NAME = "do nothing"
+CLOSEST_POINT_NAME = "closest point"
+#: Rows that depend only on the eval config, in table order around the checkpoints' rows.
+BASELINES_FIRST, BASELINES_LAST = (DO_NOTHING_NAME,), (CLOSEST_POINT_NAME, ORACLE_NAME)
 
 
 # ------------------------------------------------------------------------------------- config
@@ -97,6 +120,48 @@ def ict_to_arkit_weights(w: np.ndarray, m: np.ndarray) -> np.ndarray:
     """ICT weights (..., 53) -> ARKit weights (..., K): each ARKit shape takes the mean of the ICT
     weights it feeds (so ``browInnerUp`` = mean of the two halves; ``tongueOut`` = 0)."""
     return np.asarray(w, np.float64) @ m.T / np.maximum(m.sum(axis=1), 1.0)
+
+
+# ------------------------------------------------------------------------------------- crops
+def makehuman_crops() -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The MakeHuman base head (``data_synth/makehuman/data``, cm) as users have it:
+    {"face mask", "head", "full head", "bust": (vertices (V,3) float64, faces (F,3) int64)}.
+
+    head: skin of the head and upper neck (``neutral`` of makehuman_arkit.npz); full head: with eye
+    sockets and mouth cavity (``full_*``); bust: with neck, shoulders and upper chest (``bust_*`` of
+    makehuman_heads.npz); face mask: the head's skin triangles less than 8.8 cm behind the nose tip
+    and from 10 cm below to 13 cm above it (chin to forehead, cheeks to the front of the ears)."""
+    from importlib import resources
+
+    data = resources.files("data_synth.makehuman") / "data"
+    with np.load(str(data / "makehuman_arkit.npz"), allow_pickle=False) as a, \
+            np.load(str(data / "makehuman_heads.npz"), allow_pickle=False) as h:
+        out = {"head": (a["neutral"], a["faces"]), "full head": (a["full_neutral"], a["full_faces"]),
+               "bust": (h["bust_neutral"], h["bust_faces"])}
+        out = {k: (np.asarray(v, np.float64), np.asarray(f, np.int64)) for k, (v, f) in out.items()}
+    v, f = out["head"]
+    tip = v[np.argmax(v[:, 2])]
+    corner = v[f]
+    keep = ((corner[..., 2] > tip[2] - 8.8) & (corner[..., 1] > tip[1] - 10.0)
+            & (corner[..., 1] < tip[1] + 13.0)).all(axis=1)
+    used = np.unique(f[keep])
+    remap = np.full(len(v), -1)
+    remap[used] = np.arange(len(used))
+    return {"face mask": (v[used], remap[f[keep]]), **out}
+
+
+def frame_agreement(meshes: dict, reference: str) -> dict:
+    """For each frame kind and mesh (name -> (vertices, faces), one head in one unit): its
+    canonical scale / the reference's, and how far its canonical origin is from the reference's
+    (mm; the meshes are in cm). {kind: {name: {"scale_ratio", "centre_mm"}}}."""
+    out = {}
+    for kind in FRAMES:
+        fits = {n: Canonicaliser.fit(v, n, kind=kind, faces=f) for n, (v, f) in meshes.items()}
+        ref = fits[reference]
+        out[kind] = {n: {"scale_ratio": c.scale / ref.scale,
+                         "centre_mm": 10.0 * float(np.linalg.norm(c.centre - ref.centre))}
+                     for n, c in fits.items()}
+    return out
 
 
 # ------------------------------------------------------------------------------------- rigs
@@ -299,6 +364,40 @@ class NetworkMethod:
         return self.r.invert(frames, source_neutral=neutral)
 
 
+class DoNothingMethod:
+    """The target left neutral; inverse rigging predicts weights 0."""
+
+    name = DO_NOTHING_NAME
+
+    def transfer(self, case: Case, filters=(None,), fps: float = 30.0) -> dict:
+        pred = np.broadcast_to(case.target.neutral, case.gt.shape)
+        return {f: pred for f in filters}
+
+    def animate(self, case: Case) -> np.ndarray:
+        return np.broadcast_to(case.target.neutral, case.gt.shape)
+
+    def invert(self, case: Case) -> np.ndarray:
+        return np.zeros((len(case.source_weights), N_FACS), np.float32)
+
+
+class ClosestPointMethod:
+    """Closest-point displacement transfer in the face frame (``retarget.oracle``), given the
+    source rig's neutral."""
+
+    name = CLOSEST_POINT_NAME
+
+    def transfer(self, case: Case, filters=(None,), fps: float = 30.0) -> dict:
+        return {None: closest_point_transfer(case.source.neutral, case.source.faces,
+                                             case.source_frames, case.target.neutral,
+                                             case.target.faces, frame="face")}
+
+    def animate(self, case: Case):
+        return None
+
+    def invert(self, case: Case):
+        return None
+
+
 class OracleMethod:
     """Displacement transfer through the known (u, v) correspondence (``retarget.oracle``)."""
 
@@ -384,7 +483,7 @@ class Evaluation:
             t0 = time.monotonic()
             out["suites"][suite] = getattr(self, f"suite_{suite}")()
             out["suites"][suite]["seconds"] = round(time.monotonic() - t0, 1)
-        return out
+        return add_ratios(out)
 
     def _transfer_suite(self, suite: str) -> dict:
         cases = self.data.cases(suite)
@@ -471,6 +570,18 @@ class Evaluation:
                                       for f, v in rows.items()}
         return res
 
+    def suite_frame(self) -> dict:
+        """The canonical frames of one head under several crops (see the module docstring)."""
+        res = {"exact_gt": True, "methods": {}, "reference": "head",
+               "makehuman": frame_agreement(makehuman_crops(), "head"), "procedural": {}}
+        face_crop = {**self.cfg["tessellation"], "region": "face"}
+        for i in range(self.cfg["identities"]):
+            full, face = self.data.rig(i), self.data.rig(i, face_crop)
+            res["procedural"][f"id {i}"] = frame_agreement(
+                {"full": (full.neutral, full.faces), "face crop": (face.neutral, face.faces)},
+                "full")
+        return res
+
     def suite_real_rig(self) -> dict:
         """The real ARKit rig (see the module docstring); ``per_shape``: one-hot ARKit shapes."""
         real_cases = self.data.real_cases()
@@ -479,28 +590,73 @@ class Evaluation:
         res = {"path": str(self.cfg["real_rig"]["path"]), "shapes": shapes,
                "exact_gt": {k: c.exact for k, c in real_cases["sampled"].items()}, "methods": {}}
         for m in self.methods:
-            if isinstance(m, OracleMethod):       # the real rig has no (u, v)
-                continue
             entry = {}
             for tag, cases in real_cases.items():
                 block = {}
                 for key, case in self._bar(list(cases.items()), f"real rig {tag} [{m.name}]"):
                     if key == "invert":
-                        a = ict_to_arkit_weights(m.invert(case), m_arkit)
+                        w = m.invert(case)
+                        if w is None:
+                            continue
+                        a = ict_to_arkit_weights(w, m_arkit)
                         frame_mse = squared_errors_mm2(case.source.evaluate(a), case.source_frames).mean(1)
                         used = m_arkit.sum(1) > 0          # tongueOut has no ICT shape
                         mae = np.abs(a - case.source_weights)[:, used].mean(1)
                         block[key] = {"rig_mse_mm2": frame_mse, "weight_mae": mae}
                     else:
-                        pred = m.transfer(case)[None]                # raw codes
-                        block[key] = {"mse_mm2": squared_errors_mm2(pred, case.gt).mean(1)}
+                        preds = m.transfer(case)
+                        if preds is None:                  # the oracle: the real rig has no (u, v)
+                            continue
+                        block[key] = {"mse_mm2": squared_errors_mm2(preds[None], case.gt).mean(1)}
+                if not block:
+                    break
                 if tag == "sampled":
                     entry[tag] = {k: {n: float(np.mean(v)) for n, v in b.items()} for k, b in block.items()}
                 else:
                     entry[tag] = {s: {f"{k}.{n}": float(v[j]) for k, b in block.items() for n, v in b.items()}
                                   for j, s in enumerate(shapes)}
-            res["methods"][m.name] = entry
+            if entry:
+                res["methods"][m.name] = entry
         return res
+
+
+# ------------------------------------------------------------------------------------- ratios
+def is_error_key(key: str) -> bool:
+    """Leaves that are errors (mm² or weight MAE) and so get a do-nothing ratio; jitter does not."""
+    return key.endswith("_mm2") or key.endswith("weight_mae")
+
+
+def ratio_tree(d, base):
+    """The error leaves of ``d`` divided by the same leaves of ``base`` (nested dicts, lists per
+    segment); None where ``base`` lacks the leaf or is 0."""
+    if isinstance(d, dict):
+        out = {}
+        for k, v in d.items():
+            b = base.get(k) if isinstance(base, dict) else None
+            if isinstance(v, dict):
+                sub = ratio_tree(v, b)
+                if sub:
+                    out[k] = sub
+            elif is_error_key(k):
+                out[k] = ratio_tree(v, b)
+        return out
+    if isinstance(d, list):
+        return [ratio_tree(x, base[i] if isinstance(base, list) else None) for i, x in enumerate(d)]
+    if d is None or not isinstance(base, (int, float)) or base <= 0:
+        return None
+    return float(d) / float(base)
+
+
+def add_ratios(results: dict) -> dict:
+    """Set ``suites[s]["ratios"][method]``: every error of every method as a ratio to the do-nothing
+    error of the same cases (suites without a do-nothing row get none). Returns ``results``."""
+    for suite in results["suites"].values():
+        base = suite.get("methods", {}).get(DO_NOTHING_NAME)
+        if base is None:
+            suite.pop("ratios", None)
+            continue
+        suite["ratios"] = {m: ratio_tree(v, base) for m, v in suite["methods"].items()}
+    return results
 
 
 # ------------------------------------------------------------------------------------- markdown
@@ -518,16 +674,31 @@ def md_table(header: list[str], rows: list[list]) -> str:
     return "\n".join(lines)
 
 
+def fmt_ratio(x, ratio) -> str:
+    """An error and its ratio to doing nothing: '7.29 (0.27×)'; the error alone without a ratio."""
+    return fmt(x) if ratio is None or x is None else f"{fmt(x)} ({ratio:.2f}×)"
+
+
 def to_markdown(results: dict) -> str:
-    """All suites of ``Evaluation.run`` as markdown tables (mm² unless stated)."""
+    """All suites of ``Evaluation.run`` as markdown tables (mm² unless stated); each error is
+    followed by its ratio to the do-nothing row's error of the same cases, e.g. 7.29 (0.27×)."""
     s, methods = results["suites"], results["methods"]
     out = []
 
-    def get(suite, m, *keys):
-        d = s.get(suite, {}).get("methods", {}).get(m)
+    def dig(d, keys):
         for k in keys:
-            d = d.get(k) if isinstance(d, dict) else None
+            if isinstance(k, int):
+                d = d[k] if isinstance(d, list) and k < len(d) else None
+            else:
+                d = d.get(k) if isinstance(d, dict) else None
         return d
+
+    def get(suite, m, *keys):
+        return dig(s.get(suite, {}).get("methods", {}).get(m), keys)
+
+    def cell(suite, m, *keys):
+        """The error at ``keys`` with its do-nothing ratio."""
+        return fmt_ratio(get(suite, m, *keys), dig(s.get(suite, {}).get("ratios", {}).get(m), keys))
 
     for suite, title in (("self", "Self-retargeting"), ("cross_identity", "Cross-identity"),
                          ("cross_topology", "Cross-topology")):
@@ -538,34 +709,36 @@ def to_markdown(results: dict) -> str:
         if suite == "cross_topology":
             groups = list(dict.fromkeys(p["name"] for p in results["config"]["cross_topology"]))
         header = ["method", "MSE", "segment-avg MSE"] + [f"{g} (MSE / seg)" for g in groups]
-        rows = [[m, fmt(get(suite, m, "mse_mm2")), fmt(get(suite, m, "seg_mse_mm2"))]
-                + [f"{fmt(get(suite, m, 'pairs', g, 'mse_mm2'))} / {fmt(get(suite, m, 'pairs', g, 'seg_mse_mm2'))}"
+        rows = [[m, cell(suite, m, "mse_mm2"), cell(suite, m, "seg_mse_mm2")]
+                + [f"{cell(suite, m, 'pairs', g, 'mse_mm2')} / {cell(suite, m, 'pairs', g, 'seg_mse_mm2')}"
                    for g in groups] for m in methods]
         out.append(md_table(header, rows) + "\n")
-        per_seg = {m: get(suite, m, "per_segment_mm2") for m in methods}
-        seg_rows = [[f"{i}: {name}"] + [fmt(per_seg[m][i] if per_seg[m] else None) for m in methods]
+        seg_rows = [[f"{i}: {name}"] + [cell(suite, m, "per_segment_mm2", i) for m in methods]
                     for i, name in enumerate(results["segment_names"])]
         out.append(f"<details><summary>{title}: MSE per segment (mm²)</summary>\n\n"
                    + md_table(["segment"] + methods, seg_rows) + "\n\n</details>\n")
     if "inverse" in s:
         out.append("### Inverse rigging (exact GT: predicted weights re-applied to the identity's rig)\n")
-        rows = [[m, fmt(get("inverse", m, "mse_mm2")), fmt(get("inverse", m, "seg_mse_mm2")),
-                 fmt(get("inverse", m, "weight_mae"))] for m in methods]
+        out.append("do nothing = weights 0 applied to the rig (the neutral), and the MAE of "
+                   "predicting 0.\n")
+        rows = [[m, cell("inverse", m, "mse_mm2"), cell("inverse", m, "seg_mse_mm2"),
+                 cell("inverse", m, "weight_mae")] for m in methods]
         out.append(md_table(["method", "rig MSE", "segment-avg MSE", "weight MAE"], rows) + "\n")
     if "animate" in s:
         out.append("### Driving from FACS weights (animate: the self-retargeting targets and weights, "
                    "decoded from z_GE = [w, 0]; exact GT)\n")
-        rows = [[m, fmt(get("animate", m, "mse_mm2")), fmt(get("animate", m, "seg_mse_mm2")),
-                 fmt(get("self", m, "mse_mm2"))] for m in methods if m in s["animate"]["methods"]]
+        rows = [[m, cell("animate", m, "mse_mm2"), cell("animate", m, "seg_mse_mm2"),
+                 cell("self", m, "mse_mm2")] for m in methods if m in s["animate"]["methods"]]
         out.append(md_table(["method", "MSE", "segment-avg MSE", "self-retargeting MSE (same cases)"],
                             rows) + "\n")
     if "jitter" in s:
         j = s["jitter"]
         filters = ["raw", *FILTERS]
         out.append(f"### Jitter (smooth {j['frames']}-frame sequences at {j['fps']:g} fps, cross-identity; "
-                   f"mean |second difference| in mm, GT: {fmt(j['gt_jitter_mm'])} mm)\n")
+                   f"mean |second difference| in mm, GT: {fmt(j['gt_jitter_mm'])} mm; the baselines "
+                   f"have no codes to filter)\n")
         header = ["method"] + [f"{f} jitter (mm) / MSE" for f in filters]
-        rows = [[m] + [f"{fmt(get('jitter', m, f, 'jitter_mm'))} / {fmt(get('jitter', m, f, 'mse_mm2'))}"
+        rows = [[m] + [f"{fmt(get('jitter', m, f, 'jitter_mm'))} / {cell('jitter', m, f, 'mse_mm2')}"
                        for f in filters] for m in methods]
         out.append(md_table(header, rows) + "\n")
     if "real_rig" in s:
@@ -578,16 +751,32 @@ def to_markdown(results: dict) -> str:
                   "real→procedural MSE (semantic)"]
         keys = [("real_to_real", "mse_mm2"), ("invert", "rig_mse_mm2"), ("invert", "weight_mae"),
                 ("procedural_to_real", "mse_mm2"), ("real_to_procedural", "mse_mm2")]
-        rows = [[m] + [fmt(get("real_rig", m, "sampled", *k)) for k in keys]
+        rows = [[m] + [cell("real_rig", m, "sampled", *k) for k in keys]
                 for m in methods if m in r["methods"]]
         out.append(md_table(header, rows) + "\n")
-        for m in [m for m in methods if m in r["methods"]][:1]:
+        networks = [m for m in methods if m in r["methods"] and m not in BASELINES_FIRST + BASELINES_LAST]
+        for m in networks[:1]:
             cols = ["real_to_real.mse_mm2", "invert.rig_mse_mm2", "invert.weight_mae",
                     "procedural_to_real.mse_mm2", "real_to_procedural.mse_mm2"]
-            per = r["methods"][m]["per_shape"]
-            rows = [[shape] + [fmt(per[shape][c]) for c in cols] for shape in r["shapes"]]
+            rows = [[shape] + [cell("real_rig", m, "per_shape", shape, c) for c in cols]
+                    for shape in r["shapes"]]
             out.append(f"<details><summary>Real rig per ARKit shape (one-hot), {m}</summary>\n\n"
                        + md_table(["shape"] + header[1:], rows) + "\n\n</details>\n")
+    if "frame" in s:
+        f = s["frame"]
+        out.append("### Canonical frame under crops (no method: scale / the reference's, and the "
+                   "shift of the canonical origin in mm)\n\nThe MakeHuman head of "
+                   "data_synth/makehuman/data (reference: head):\n")
+        rows = [[name] + [f"{f['makehuman'][k][name]['scale_ratio']:.3f} / "
+                          f"{f['makehuman'][k][name]['centre_mm']:.1f}" for k in FRAMES]
+                for name in f["makehuman"][FRAMES[0]]]
+        out.append(md_table(["crop"] + [f"{k} frame: scale ratio / shift (mm)" for k in FRAMES],
+                            rows) + "\n")
+        out.append("Procedural test identities, face crop against the full head:\n")
+        rows = [[i] + [f"{p[k]['face crop']['scale_ratio']:.3f} / {p[k]['face crop']['centre_mm']:.1f}"
+                       for k in FRAMES] for i, p in f["procedural"].items()]
+        out.append(md_table(["identity"] + [f"{k} frame: scale ratio / shift (mm)" for k in FRAMES],
+                            rows) + "\n")
     return "\n".join(out)
 
 
@@ -642,8 +831,9 @@ def parse_checkpoints(specs) -> list[tuple[str, Path]]:
 def merge_results(paths) -> dict:
     """One results dict from several ``eval.json`` files of the same eval config (e.g. checkpoints
     evaluated as their trainings finished): their methods side by side, suite by suite, in the
-    order given (the oracle last). RetargetError naming the file for an unreadable file, another config, or a method
-    name that two files share."""
+    order given (``sort_methods``). The baselines depend only on the config, so the first file's
+    rows are kept; the do-nothing ratios are recomputed. RetargetError naming the file for an
+    unreadable file, another config, or a checkpoint name that two files share."""
     import json
 
     merged = None
@@ -661,21 +851,32 @@ def merge_results(paths) -> dict:
         if config != merged["config"]:
             raise RetargetError(f"{path}: evaluated with another eval config than {paths[0]}; only "
                                 f"results of the same config can share a table")
-        twice = sorted(set(methods) & set(merged["methods"]))
+        baselines = BASELINES_FIRST + BASELINES_LAST   # the same config gives the same rows
+        twice = sorted((set(methods) & set(merged["methods"])) - set(baselines))
         if twice:
             raise RetargetError(f"{path}: method(s) {twice} already in the merged table (rename one "
                                 f"with --checkpoint NAME=PATH)")
-        merged["methods"] += methods
+        merged["methods"] += [m for m in methods if m not in merged["methods"]]
         merged["checkpoints"].update(res.get("checkpoints", {}))
         for name, suite in suites.items():
             if name not in merged["suites"]:
                 merged["suites"][name] = copy.deepcopy(suite)
             else:
-                merged["suites"][name]["methods"].update(suite["methods"])
+                for m, v in suite["methods"].items():
+                    merged["suites"][name]["methods"].setdefault(m, copy.deepcopy(v))
     if merged is None:
         raise RetargetError("--merge needs at least one eval.json")
-    merged["methods"] = sorted(merged["methods"], key=lambda m: m == ORACLE_NAME)  # oracle last
-    return merged
+    merged["methods"] = sort_methods(merged["methods"])
+    return add_ratios(merged)
+
+
+def sort_methods(names) -> list:
+    """Table order: do nothing, the checkpoints (in the order given), closest point, the oracle."""
+    def key(m):
+        if m in BASELINES_FIRST:
+            return -1
+        return BASELINES_LAST.index(m) + 1 if m in BASELINES_LAST else 0
+    return sorted(names, key=key)
 
 
 def write_results(out_dir, stem: str, results: dict, markdown: str) -> tuple[Path, Path]:

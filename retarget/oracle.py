@@ -1,4 +1,9 @@
-"""The classical baseline of ``retarget eval``: displacement transfer through a known (u, v)
+"""The classical baselines of ``retarget eval``.
+
+:func:`closest_point_transfer` is the peer to beat: each target vertex takes the displacement of
+the nearest source vertex once both heads are canonicalised, with no correspondence given.
+
+The rest of this module is the oracle: displacement transfer through a known (u, v)
 correspondence (Noh & Neumann 2001 style, with the correspondence given instead of fitted).
 
 Every procedural tessellation samples the same (u, v) parameter domain, so each target vertex can
@@ -99,3 +104,31 @@ def displacement_transfer(transfer: sp.csr_matrix, src_neutral: np.ndarray,
     disp = frames.reshape(-1, *frames.shape[-2:]) - np.asarray(src_neutral, np.float64)
     out = np.stack([tgt_neutral + transfer @ d for d in disp])
     return out[0] if single else out
+
+
+def closest_point_transfer(src_neutral: np.ndarray, src_faces: np.ndarray, src_frames: np.ndarray,
+                           tgt_neutral: np.ndarray, tgt_faces: np.ndarray,
+                           frame: str = "face") -> np.ndarray:
+    """The closest-point displacement-transfer baseline: what a technical artist tries first in a
+    DCC tool once the two heads are aligned.
+
+    Both neutrals are canonicalised on their own (``retarget.canonical.Canonicaliser``, frame kind
+    ``frame``: "face" aligns the faces whatever the crop, "bbox" the bounding boxes); each target
+    vertex takes the displacement (frame − neutral) of the nearest source vertex in the canonical
+    frame, converted from the source's units to canonical units and then to the target's units.
+    It needs the source neutral (displacements are measured from it), no correspondence and no
+    (u, v); on one mesh (self-retargeting) it is exact.
+
+    src_neutral (Vs,3), src_faces (Fs,3), src_frames (T,Vs,3) or (Vs,3) in the source's units;
+    tgt_neutral (Vt,3), tgt_faces (Ft,3) in the target's units (any units and offsets).
+    Returns (T,Vt,3) or (Vt,3) float64 target frames in the target's units.
+    """
+    from .canonical import Canonicaliser
+
+    src_canon = Canonicaliser.fit(src_neutral, "source", kind=frame, faces=src_faces)
+    tgt_canon = Canonicaliser.fit(tgt_neutral, "target", kind=frame, faces=tgt_faces)
+    _, nearest = cKDTree(src_canon.to_canonical(src_neutral)).query(tgt_canon.to_canonical(tgt_neutral))
+    frames = np.asarray(src_frames, np.float64)
+    disp = (frames - np.asarray(src_neutral, np.float64))[..., nearest, :]
+    return np.asarray(tgt_neutral, np.float64) + tgt_canon.displacement_from_canonical(
+        src_canon.displacement_to_canonical(disp))

@@ -67,18 +67,21 @@ def vertex_features(canonical_vertices: np.ndarray, faces: np.ndarray) -> np.nda
 
 def prepare_mesh(vertices: np.ndarray, faces: np.ndarray, k_eig: int, image_size: int,
                  image_channels: tuple[str, ...], canon: Canonicaliser | None = None,
-                 ops: Operators | None = None, cache_dir=None) -> PreparedMesh:
+                 ops: Operators | None = None, cache_dir=None,
+                 canonical: str = "bbox") -> PreparedMesh:
     """Canonicalise a mesh and compute everything the network needs.
 
     vertices (V,3) in any units/offset, faces (F,3). ``canon``: reuse a canonicaliser (e.g. the
-    neutral's, for its expression frames); default: fitted on these vertices. ``ops``: reuse operators
+    neutral's, for its expression frames); default: fitted on these vertices, of the frame kind
+    ``canonical`` (the model's ``NFSConfig.canonical``). The frontal image frames what the
+    canonicaliser says (``Canonicaliser.render_fit``). ``ops``: reuse operators
     (an expression frame may reuse its neutral's, as the NFS authors do); default: computed on the
     canonical mesh and cached on disk by content hash (``cache_dir``, see nets.geometry).
     """
-    canon = canon or Canonicaliser.fit(vertices)
-    cv = canon.to_canonical(vertices).astype(np.float32)
     faces = np.asarray(faces, np.int64)
+    canon = canon or Canonicaliser.fit(vertices, kind=canonical, faces=faces)
+    cv = canon.to_canonical(vertices).astype(np.float32)
     if ops is None:
         ops = load_or_compute_operators(cv, faces, k_eig, cache_dir=cache_dir)
-    image = render_frontal(cv, faces, image_size, channels=tuple(image_channels))
+    image = render_frontal(cv, faces, image_size, channels=tuple(image_channels), fit=canon.render_fit)
     return PreparedMesh(canon, cv, faces, vertex_features(cv, faces), ops, image)

@@ -189,17 +189,20 @@ def _renderer(size: int) -> Renderer:
     return _RENDERERS[int(size)]
 
 
-def render_frontal(verts, faces, size: int = 256, channels=("shaded", "depth")) -> np.ndarray:
-    """The CNN input image: a front view framing the mesh's bounding box.
+def render_frontal(verts, faces, size: int = 256, channels=("shaded", "depth"),
+                   fit=True) -> np.ndarray:
+    """The CNN input image: a front view framing the mesh's bounding box (``fit=True``), or a fixed
+    box ``fit`` = [min, max] (2,3) in the vertices' frame (the face frame's
+    ``Canonicaliser.render_fit``, so the image follows the face whatever the crop).
 
     verts (V,3), faces (F,3). channels: any of "shaded" (1 channel, grey), "depth" (1) and "normals"
-    (3), stacked in the given order. Returns (C,H,W) float32 in [0,1], invariant to the mesh's scale
-    and translation.
+    (3), stacked in the given order. Returns (C,H,W) float32 in [0,1]; with ``fit=True`` invariant
+    to the mesh's scale and translation.
     """
     r = _renderer(size)
     planes = []
     for ch in channels:
-        img = r.render(verts, faces, mode=ch)
+        img = r.render(verts, faces, mode=ch, fit=fit)
         planes.append(img[..., :1] if ch == "shaded" else img)
     return np.ascontiguousarray(np.concatenate(planes, axis=-1).transpose(2, 0, 1))
 

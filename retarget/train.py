@@ -224,7 +224,8 @@ def validate(model: NFSModel, val_set, device) -> dict[str, float]:
             frame = entry.mesh.canon.to_canonical(entry.rig.evaluate(w)).astype(np.float32)
             feat = torch.from_numpy(vertex_features(frame, entry.mesh.faces)).to(device)
             img = render_frontal(frame, entry.mesh.faces, model.cfg.image_size,
-                                 channels=IMAGE_CHANNELS[model.cfg.image_channels])
+                                 channels=IMAGE_CHANNELS[model.cfg.image_channels],
+                                 fit=entry.mesh.canon.render_fit)
             c_s = model.image_code(torch.from_numpy(img)[None].to(device))[0]
             z_ge = model.encode_expression(feat, c_s, t_ops)
             dv = model.decode_target(t_feat, c_t, codes, z_ge).cpu().numpy()

@@ -75,7 +75,7 @@ def prepare_entry(identity: np.ndarray, tess_spec: dict, tess_seed: int, model_c
     tess = tessellate(seed=tess_seed, **tess_spec)
     rig = build_rig(identity, tess, n_segments=n_segments)
     mesh = prepare_mesh(rig.neutral, rig.faces, model_cfg.k_eig, model_cfg.image_size,
-                        IMAGE_CHANNELS[model_cfg.image_channels])
+                        IMAGE_CHANNELS[model_cfg.image_channels], canonical=model_cfg.canonical)
     return Entry(rig, mesh, (rig.deltas * mesh.canon.scale).astype(np.float32))
 
 
@@ -167,7 +167,8 @@ def make_source(entry: Entry, weights: np.ndarray, kind: str, rng: np.random.Gen
     shift = rng.normal(size=3) * augment.get("translate", 0.0)
     frame = (frame @ rot.T) * scale + shift
     prepared = prepare_mesh(frame, entry.rig.faces, model_cfg.k_eig, model_cfg.image_size,
-                            IMAGE_CHANNELS[model_cfg.image_channels], ops=entry.mesh.ops)
+                            IMAGE_CHANNELS[model_cfg.image_channels], ops=entry.mesh.ops,
+                            canonical=model_cfg.canonical)
     return Source(entry, prepared.feat, prepared.image, weights, kind)
 
 
@@ -193,7 +194,7 @@ class RigPool:
             raise RetargetError(f"{rig.name}: segment labels reach {int(rig.segments.max())}, but the "
                                 f"model has {model_cfg.n_segments} segments")
         mesh = prepare_mesh(rig.neutral, rig.faces, model_cfg.k_eig, model_cfg.image_size,
-                            IMAGE_CHANNELS[model_cfg.image_channels])
+                            IMAGE_CHANNELS[model_cfg.image_channels], canonical=model_cfg.canonical)
         self.entry = Entry(rig, mesh, (rig.deltas * mesh.canon.scale).astype(np.float32),
                            rig.present)
         self.procedural = TargetPool(data_cfg, model_cfg, seed) if self.mix < 1.0 else None

@@ -47,3 +47,103 @@ def test_flat_mesh_is_refused():
     flat = np.array([[0, 0, 0], [0, 1, 0], [0, 0, 1.0]])
     with pytest.raises(RetargetError, match="face.obj: has no width"):
         Canonicaliser.fit(flat, name="face.obj")
+
+
+# ------------------------------------------------------------------------------------- face frame
+from pathlib import Path  # noqa: E402
+
+from data_synth.identity import sample_identity  # noqa: E402
+from data_synth.rig import build_rig  # noqa: E402
+from data_synth.tessellate import tessellate  # noqa: E402
+
+SHARED_RIGS = Path(__file__).resolve().parents[2] / "shared" / "rigs"
+PACKAGED = Path(__file__).resolve().parents[1] / "data_synth" / "makehuman" / "data"
+RIGS = SHARED_RIGS if (SHARED_RIGS / "makehuman_heads.npz").is_file() else PACKAGED
+
+
+def procedural(identity: int, n: int, kind: str, region: str):
+    rig = build_rig(sample_identity(identity, split="test"), tessellate(n, kind, region=region, seed=0))
+    return rig.neutral.astype(np.float64), rig.faces
+
+
+def test_face_frame_ignores_units_and_offsets():
+    v, f = procedural(0, 1500, "adaptive", "full")
+    a = Canonicaliser.fit(v, kind="face", faces=f)
+    b = Canonicaliser.fit(v * 10.0 + [30.0, -200.0, 5.0], kind="face", faces=f)   # mm, moved
+    assert a.kind == b.kind == "face"
+    assert np.allclose(a.to_canonical(v), b.to_canonical(v * 10.0 + [30.0, -200.0, 5.0]), atol=1e-6)
+    assert a.render_fit is not True and Canonicaliser.fit(v).render_fit is True
+
+
+@pytest.mark.parametrize("identity", [0, 2])
+def test_face_frame_of_a_procedural_face_crop_matches_its_full_head(identity):
+    full = procedural(identity, 2500, "adaptive", "full")
+    face = procedural(identity, 1800, "regular", "face")
+    a, b = (Canonicaliser.fit(v, kind="face", faces=f) for v, f in (full, face))
+    box_a, box_b = Canonicaliser.fit(full[0]), Canonicaliser.fit(face[0])
+    assert abs(b.scale / a.scale - 1) < 0.05
+    assert abs(box_b.scale / box_a.scale - 1) > 0.1                 # the bounding box is fooled
+    assert np.linalg.norm(b.centre - a.centre) < 1.0                 # cm
+
+
+def makehuman_crops():
+    """The MakeHuman head (cm) as face mask (cut here: a ball around the face, in front of the
+    ears), head + upper neck, head with sockets and mouth cavity, and bust."""
+    a = np.load(RIGS / "makehuman_arkit.npz", allow_pickle=False)
+    h = np.load(RIGS / "makehuman_heads.npz", allow_pickle=False)
+    v, f = a["neutral"].astype(np.float64), a["faces"].astype(np.int64)
+    tip = v[np.argmax(v[:, 2])]
+    keep = (np.linalg.norm(v[f] - (tip - [0, -2.0, 7.0]), axis=-1) < 11.0).all(axis=1)
+    keep &= (v[f][..., 2] > tip[2] - 9.5).all(axis=1)
+    used = np.unique(f[keep])
+    remap = np.full(len(v), -1)
+    remap[used] = np.arange(len(used))
+    return {"face mask": (v[used], remap[f[keep]]), "head": (v, f),
+            "full head": (a["full_neutral"].astype(np.float64), a["full_faces"].astype(np.int64)),
+            "bust": (h["bust_neutral"].astype(np.float64), h["bust_faces"].astype(np.int64))}
+
+
+@pytest.mark.skipif(not (RIGS / "makehuman_heads.npz").is_file(), reason="MakeHuman heads not present")
+def test_face_frame_is_the_same_for_a_face_mask_a_head_and_a_bust():
+    crops = makehuman_crops()
+    assert len(crops["face mask"][0]) < 0.8 * len(crops["head"][0])
+    fits = {k: Canonicaliser.fit(v, k, kind="face", faces=f) for k, (v, f) in crops.items()}
+    boxes = {k: Canonicaliser.fit(v, k) for k, (v, f) in crops.items()}
+    ref = fits["head"]
+    for name, c in fits.items():
+        assert abs(c.scale / ref.scale - 1) < 0.05, name
+        assert np.linalg.norm(c.centre - ref.centre) < 0.5, name           # 5 mm
+    assert boxes["bust"].scale < 0.5 * boxes["head"].scale                  # what the face frame fixes
+    assert abs(boxes["face mask"].scale / boxes["head"].scale - 1) > 0.1
+
+
+def test_frame_kind_errors():
+    v, f = procedural(0, 600, "regular", "full")
+    with pytest.raises(ValueError, match="unknown canonical frame"):
+        Canonicaliser.fit(v, kind="sphere")
+    with pytest.raises(ValueError, match="needs the faces"):
+        Canonicaliser.fit(v, kind="face")
+
+
+def test_model_config_records_the_frame_and_old_checkpoints_are_bbox():
+    from nets.model import NFSConfig
+
+    assert NFSConfig.from_dict({}).canonical == "bbox"          # checkpoints without the key
+    assert NFSConfig.preset("tiny", canonical="face").to_dict()["canonical"] == "face"
+    with pytest.raises(ValueError, match="canonical"):
+        NFSConfig(canonical="sphere")
+
+
+def test_face_frame_model_renders_the_face_box_whatever_the_crop():
+    """prepare_mesh of a face-frame model: a bust's image shows the face where the head's does."""
+    from retarget.prepare import prepare_mesh
+
+    if not (RIGS / "makehuman_heads.npz").is_file():
+        pytest.skip("MakeHuman heads not present")
+    crops = makehuman_crops()
+    img = {(k, kind): prepare_mesh(*crops[k], k_eig=8, image_size=32, image_channels=("shaded",),
+                                   canonical=kind).image
+           for k in ("head", "bust") for kind in ("bbox", "face")}
+    face_diff = np.abs(img["head", "face"] - img["bust", "face"])[:, :20].mean()   # the face rows
+    bbox_diff = np.abs(img["head", "bbox"] - img["bust", "bbox"])[:, :20].mean()
+    assert face_diff < 0.3 * bbox_diff

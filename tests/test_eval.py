@@ -13,16 +13,17 @@ from data_synth.tessellate import tessellate
 from nets.model import NFSConfig, NFSModel
 from retarget.cli import main
 from retarget.errors import RetargetError
-from retarget.evaluate import (SUITES, Evaluation, OracleMethod, RealRig, EvalData, arkit_ict_matrix,
+from retarget.evaluate import (SUITES, ClosestPointMethod, DoNothingMethod, Evaluation, OracleMethod,
+                               RealRig, EvalData, arkit_ict_matrix,
                                case_errors, ict_to_arkit_weights, load_eval_config,
                                parse_checkpoints, summarise, to_markdown)
 from retarget.metrics import mse_mm2, second_difference_jitter_mm, segment_mse_mm2, weight_mae
-from retarget.oracle import displacement_transfer, locate, uv_transfer_matrix
+from retarget.oracle import closest_point_transfer, displacement_transfer, locate, uv_transfer_matrix
 from retarget.train import CHECKPOINT_FORMAT, save_checkpoint
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ROOT / "configs" / "eval" / "tiny.yaml"
-REAL_RIG = ROOT.parent / "shared" / "rigs" / "makehuman_arkit.npz"
+REAL_RIG = ROOT / "data_synth" / "makehuman" / "data" / "makehuman_arkit.npz"   # the packaged copy
 
 
 def tiny_checkpoint(path: Path, **overrides) -> Path:
@@ -110,6 +111,22 @@ def test_oracle_exact_on_one_tessellation_and_close_across():
     assert mse_mm2(cross, b.evaluate(w)) < 0.05 * motion      # interpolation error only
 
 
+def test_closest_point_transfer_converts_units_and_beats_nothing_across_topologies():
+    z = sample_identity(0, split="test")
+    a = build_rig(z, tessellate(900, "regular", seed=0))
+    b = build_rig(z, tessellate(1500, "jittered", region="face", seed=1))
+    w = np.random.default_rng(1).uniform(0, 1, (2, 53)).astype(np.float32)
+    # the target in mm and moved: the result is in its units, its displacements 10x the cm ones
+    mm = closest_point_transfer(a.neutral, a.faces, a.evaluate(w), b.neutral * 10 + 5.0, b.faces)
+    cm = closest_point_transfer(a.neutral, a.faces, a.evaluate(w), b.neutral, b.faces)
+    assert cm.shape == (2, len(b.neutral), 3)
+    assert np.allclose(mm, cm * 10 + 5.0, atol=1e-6)
+    err, nothing = mse_mm2(cm, b.evaluate(w)), mse_mm2(b.neutral[None], b.evaluate(w))
+    assert err < 0.3 * nothing
+    same = closest_point_transfer(a.neutral, a.faces, a.evaluate(w)[0], a.neutral, a.faces)
+    assert np.allclose(same, a.evaluate(w)[0], atol=1e-6)
+
+
 def test_oracle_locates_and_falls_back_to_nearest():
     uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
     faces = np.array([[0, 1, 2], [1, 3, 2]])
@@ -141,8 +158,21 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     cfg = tiny_config()
     d = np.array([0.0, 0.2, 0.1])
     expected = 100 * (d ** 2).sum()
-    res = Evaluation(cfg, [GroundTruthMethod(d), OracleMethod()], progress=False).run(
+    res = Evaluation(cfg, [DoNothingMethod(), GroundTruthMethod(d), ClosestPointMethod(),
+                           OracleMethod()], progress=False).run(
         ["self", "cross_topology", "inverse", "jitter", "animate"])["suites"]
+    # doing nothing scores the motion itself; every error is also a ratio to it
+    cases = EvalData(cfg).cases("self")
+    motion = np.mean([mse_mm2(c.gt, c.target.neutral[None]) for c in cases])
+    nothing = res["self"]["methods"]["do nothing"]["mse_mm2"]
+    assert nothing == pytest.approx(motion)
+    assert res["self"]["ratios"]["gt+offset"]["mse_mm2"] == pytest.approx(expected / nothing)
+    assert res["self"]["methods"]["closest point"]["mse_mm2"] < 1e-8      # one mesh: exact
+    inv_nothing = res["inverse"]["methods"]["do nothing"]
+    inv_cases = EvalData(cfg).cases("inverse")
+    assert inv_nothing["weight_mae"] == pytest.approx(np.mean([c.source_weights.mean() for c in inv_cases]))
+    assert "closest point" not in res["inverse"]["methods"]
+    assert res["jitter"]["methods"]["do nothing"]["raw"]["jitter_mm"] == 0.0
     gt = res["self"]["methods"]["gt+offset"]
     assert gt["mse_mm2"] == pytest.approx(expected) and gt["seg_mse_mm2"] == pytest.approx(expected)
     assert res["self"]["methods"]["oracle (u,v)"]["mse_mm2"] < 1e-8
@@ -156,7 +186,7 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     assert jit["jitter_mm"] == pytest.approx(res["jitter"]["gt_jitter_mm"])
 
 
-@pytest.mark.skipif(not REAL_RIG.exists(), reason="shared/rigs/makehuman_arkit.npz not present")
+@pytest.mark.skipif(not REAL_RIG.exists(), reason="makehuman_arkit.npz not present")
 def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     a = tiny_checkpoint(tmp_path / "full.pt")
     b = tiny_checkpoint(tmp_path / "noskin.pt", use_skinning=False)
@@ -167,20 +197,33 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     assert rc == 0
     res = json.loads((out / "eval.json").read_text())
     assert set(res["suites"]) == set(SUITES)
+    baselines = {"do nothing", "closest point", "oracle (u,v)"}
     for suite in ("self", "cross_identity", "cross_topology", "jitter"):
-        assert set(res["suites"][suite]["methods"]) == {"full", "noskin", "oracle (u,v)"}, suite
+        assert set(res["suites"][suite]["methods"]) == {"full", "noskin"} | baselines, suite
+        ratio = res["suites"][suite]["ratios"]["do nothing"]
+        assert (ratio["raw"] if suite == "jitter" else ratio)["mse_mm2"] == 1.0
     assert res["suites"]["self"]["methods"]["oracle (u,v)"]["mse_mm2"] < 1e-8
+    assert res["suites"]["self"]["methods"]["closest point"]["mse_mm2"] < 1e-8
     assert res["suites"]["self"]["methods"]["full"]["mse_mm2"] > 0
-    assert set(res["suites"]["animate"]["methods"]) == {"full", "noskin"}
+    assert set(res["suites"]["animate"]["methods"]) == {"full", "noskin", "do nothing"}
     assert res["suites"]["animate"]["methods"]["full"]["mse_mm2"] > 0
     assert len(res["suites"]["self"]["methods"]["full"]["per_segment_mm2"]) == 20
     real = res["suites"]["real_rig"]["methods"]["full"]
     assert set(real["per_shape"]) == {"jawOpen", "eyeBlinkLeft"}
     assert real["sampled"]["invert"]["weight_mae"] >= 0
+    real_methods = res["suites"]["real_rig"]["methods"]
+    assert set(real_methods) == {"full", "noskin", "do nothing", "closest point"}
+    assert real_methods["closest point"]["sampled"]["real_to_real"]["mse_mm2"] < 1e-8
+    assert "invert" not in real_methods["closest point"]["sampled"]
+    ratio = res["suites"]["real_rig"]["ratios"]["full"]["sampled"]["real_to_real"]["mse_mm2"]
+    assert ratio == pytest.approx(real["sampled"]["real_to_real"]["mse_mm2"]
+                                  / real_methods["do nothing"]["sampled"]["real_to_real"]["mse_mm2"])
+    frame = res["suites"]["frame"]["makehuman"]
+    assert abs(frame["face"]["bust"]["scale_ratio"] - 1) < 0.05 and frame["bbox"]["bust"]["scale_ratio"] < 0.5
     md = (out / "eval.md").read_text()
     for title in ("Self-retargeting", "Cross-identity", "Cross-topology", "Inverse rigging",
                   "Jitter", "Real ARKit rig", "Driving from FACS weights", "| full |",
-                  "| oracle (u,v) |"):
+                  "| oracle (u,v) |", "| do nothing | ", "(1.00×)", "Canonical frame under crops"):
         assert title in md
     pngs = sorted(heat.glob("*.png"))
     assert len(pngs) == 3 and all(p.stat().st_size > 100 for p in pngs)
@@ -227,7 +270,7 @@ def test_config_and_checkpoint_errors(tmp_path):
 def test_a_missing_real_rig_leaves_its_suite_out_unless_asked_for(tmp_path, capsys):
     ck = tiny_checkpoint(tmp_path / "m.pt")
     cfg = tmp_path / "norig.yaml"
-    cfg.write_text((TINY.read_text().replace("../shared/rigs/makehuman_arkit.npz",
+    cfg.write_text((TINY.read_text().replace("data_synth/makehuman/data/makehuman_arkit.npz",
                                              str(tmp_path / "absent.npz"))))
     assert main(["eval", "--config", str(cfg), "--checkpoint", str(ck), "--no-oracle",
                  "--no-progress", "--out", str(tmp_path / "out")]) == 0
@@ -249,9 +292,10 @@ def test_merge_puts_separately_evaluated_checkpoints_in_one_table(tmp_path, caps
                  "--out", str(both)]) == 0
     res = json.loads((both / "eval.json").read_text())
     single = json.loads((tmp_path / "b/eval.json").read_text())
-    assert res["methods"] == ["a", "b", "oracle (u,v)"]
+    assert res["methods"] == ["do nothing", "a", "b", "closest point", "oracle (u,v)"]   # baselines once
+    assert res["suites"]["self"]["ratios"]["b"] == single["suites"]["self"]["ratios"]["b"]
     assert res["suites"]["self"]["methods"]["b"] == single["suites"]["self"]["methods"]["b"]
-    assert set(res["suites"]["inverse"]["methods"]) == {"a", "b"}
+    assert set(res["suites"]["inverse"]["methods"]) == {"a", "b", "do nothing"}
     assert "| b |" in (both / "eval.md").read_text()
     capsys.readouterr()
     # the same method twice, another config, a file that is not an eval.json: clear errors

@@ -35,9 +35,9 @@ def run(args) -> int:
     from pathlib import Path
 
     from ..api import Retargeter
-    from ..evaluate import (SUITES, Evaluation, NetworkMethod, OracleMethod, load_eval_config,
-                            parse_checkpoints, real_rig_path, to_markdown, write_heatmaps,
-                            write_results)
+    from ..evaluate import (SUITES, ClosestPointMethod, DoNothingMethod, Evaluation, NetworkMethod,
+                            OracleMethod, load_eval_config, parse_checkpoints, real_rig_path,
+                            to_markdown, write_heatmaps, write_results)
 
     if args.merge:
         from ..evaluate import merge_results
@@ -53,13 +53,13 @@ def run(args) -> int:
     if args.real_rig:
         cfg["real_rig"]["path"] = str(Path(args.real_rig).resolve())
     elif not args.suite and not real_rig_path(cfg).is_file():
-        # e.g. after a pip install, without the repository's ../shared/rigs: run the rest
+        # e.g. a real_rig.path that does not exist here: run the rest
         print(f"note: {real_rig_path(cfg)} not found, the real_rig suite is left out "
               f"(pass --real-rig RIG.npz to run it)")
         suites.remove("real_rig")
     checkpoints = parse_checkpoints(args.checkpoint)
-    methods = [NetworkMethod(name, Retargeter.load(path, device=args.device))
-               for name, path in checkpoints]
+    methods = [DoNothingMethod()] + [NetworkMethod(name, Retargeter.load(path, device=args.device))
+                                     for name, path in checkpoints] + [ClosestPointMethod()]
     if not args.no_oracle:
         methods.append(OracleMethod())
     evaluation = Evaluation(cfg, methods, progress=not args.no_progress)
