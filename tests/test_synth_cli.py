@@ -4,7 +4,6 @@ import pytest
 import yaml
 
 from data_synth.dataset import ShardReader
-from data_synth.identity import mean_identity
 from retarget.calibrate import DEFAULT_RIG, compare, markdown_table, shape_stats, summary
 from retarget.cli import main
 
