@@ -18,15 +18,21 @@ from .tessellate import Tessellation, tessellate
 @dataclass
 class Rig:
     """neutral (V,3) float32 cm; deltas (53,V,3) float32 cm (ICT order); faces (F,3) int64;
-    uv (V,2) float64; segments (V,) int64 in [0, L); identity (J,) float64; segment_names (L,)."""
+    uv (V,2) float64, the (u, v) of a procedural head (None for a realistic head); segments (V,)
+    int64 in [0, L); identity (J,) float64, the procedural identity coefficients that L_ID
+    supervises (None for a realistic head); segment_names (L,); present (53,) bool, the shapes
+    the rig has (None = all 53); correspondence: for a realistic head its (V, 5472) sparse map
+    from the MakeHuman base vertices (``data_synth.makehuman.tessellate``), else None."""
 
     neutral: np.ndarray
     deltas: np.ndarray
     faces: np.ndarray
-    uv: np.ndarray
+    uv: np.ndarray | None
     segments: np.ndarray
-    identity: np.ndarray
+    identity: np.ndarray | None
     segment_names: tuple
+    present: np.ndarray | None = None
+    correspondence: object = None
 
     def evaluate(self, weights) -> np.ndarray:
         """neutral + weights . deltas: weights (53,) -> (V,3) or (T,53) -> (T,V,3), float32 cm."""

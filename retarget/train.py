@@ -45,6 +45,12 @@ DEFAULTS = {
         "augment": {"rotate_deg": 3.0, "scale": 0.05, "translate": 0.5},
         "val_identities": 4, "val_expressions": 4,
         "rig": None, "keep_vertices": None, "rig_mix": 0.5,
+        # shares of the two rig sources among the pool's identities (training_data.TargetPool)
+        "sources": {"procedural": 1.0, "makehuman": 0.0},
+        "makehuman": {
+            "tessellations": [{"n_vertices": 2500, "kind": "decimated", "crop": "head_neck"}],
+            "expressions": {"arkit": 1.0, "units": 0.0}, "style": True, "stylised_share": 0.15,
+        },
     },
     "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,
              "bp": 1.0, "br": 1.0, "nll": 1.0, "free_dims_dropout": 0.0},

@@ -1,4 +1,5 @@
-"""Training samples from procedural rigs: a deterministic pool of prepared identities.
+"""Training samples from synthesised rigs — procedural (u, v) heads and realistic MakeHuman heads
+(``data.sources`` gives their shares): a deterministic pool of prepared identities.
 
 Preparing a target (rig, operators, frontal image) costs about a second on a CPU, a training step a
 fraction of that, so targets are kept in a *pool* of ``pool_size`` slots. Each slot holds one
@@ -11,7 +12,9 @@ have seen, without saving any sampler state.
 
 A sample (``Group``) is one target neutral and S sources with expressions, whose ground truth is the
 target's rig driven by the sources' weights — exact for self-, cross-identity and cross-topology
-pairs because every procedural tessellation samples the same (u, v) surface.
+pairs because every procedural tessellation samples the same (u, v) surface and every MakeHuman
+tessellation is a fixed linear map of the same base vertices. Shapes that a rig lacks (the
+MakeHuman expression units have 29 of the 53) get weight 0 in the sources and the ground truth.
 
 Fine-tuning on the user's own rig (``data.rig``, ``retarget train --rig``) uses ``RigPool``: the
 same groups drawn from that rig (self-retargeting only), mixed with procedural ones.
@@ -31,6 +34,7 @@ from .errors import RetargetError
 from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh
 
 PAIR_KINDS = ("self", "cross_topology", "cross_identity")
+RIG_SOURCES = ("procedural", "makehuman")
 
 
 @dataclass
@@ -69,14 +73,64 @@ class Group:
     gt_dv: np.ndarray
 
 
-def prepare_entry(identity: np.ndarray, tess_spec: dict, tess_seed: int, model_cfg,
-                  n_segments: int) -> Entry:
-    """Build the rig of ``identity`` on a tessellation and prepare its neutral for the network."""
-    tess = tessellate(seed=tess_seed, **tess_spec)
-    rig = build_rig(identity, tess, n_segments=n_segments)
+def prepare_rig(rig, model_cfg) -> Entry:
+    """Prepare a rig's neutral for the network: an ``Entry`` with its canonical basis."""
     mesh = prepare_mesh(rig.neutral, rig.faces, model_cfg.k_eig, model_cfg.image_size,
                         IMAGE_CHANNELS[model_cfg.image_channels], canonical=model_cfg.canonical)
-    return Entry(rig, mesh, (rig.deltas * mesh.canon.scale).astype(np.float32))
+    return Entry(rig, mesh, (rig.deltas * mesh.canon.scale).astype(np.float32),
+                 getattr(rig, "present", None))
+
+
+def prepare_entry(identity: np.ndarray, tess_spec: dict, tess_seed: int, model_cfg,
+                  n_segments: int) -> Entry:
+    """Build the procedural rig of ``identity`` on a tessellation and prepare it."""
+    tess = tessellate(seed=tess_seed, **tess_spec)
+    return prepare_rig(build_rig(identity, tess, n_segments=n_segments), model_cfg)
+
+
+def source_shares(data_cfg: dict) -> np.ndarray:
+    """(2,) probabilities of ``RIG_SOURCES`` from ``data.sources``; RetargetError if invalid."""
+    shares = data_cfg.get("sources") or {"procedural": 1.0}
+    unknown = set(shares) - set(RIG_SOURCES)
+    p = np.array([float(shares.get(k, 0.0)) for k in RIG_SOURCES])
+    if unknown or (p < 0).any() or p.sum() <= 0:
+        raise RetargetError(f"data.sources must give non-negative shares of {', '.join(RIG_SOURCES)}"
+                            f" (got {shares})")
+    return p / p.sum()
+
+
+class MakeHumanRigs:
+    """Realistic rigs of the ``data.makehuman`` section: an identity of ``split`` (its
+    ``stylised_share``), its shapes from ``expressions`` ({"arkit": p, "units": p}, drawn per
+    identity) with a per-rig ``style`` (or as authored), on the listed ``tessellations``
+    (``data_synth.makehuman.head_tessellation`` arguments)."""
+
+    def __init__(self, mh_cfg: dict, split: str):
+        self.cfg, self.split = mh_cfg, split
+        self.specs = list(mh_cfg["tessellations"])
+        kinds = sorted(mh_cfg["expressions"])
+        self.expr_kinds = kinds
+        p = np.array([float(mh_cfg["expressions"][k]) for k in kinds])
+        if (p < 0).any() or p.sum() <= 0 or not set(kinds) <= {"arkit", "units"}:
+            raise RetargetError(f"data.makehuman.expressions must give shares of arkit, units "
+                                f"(got {mh_cfg['expressions']})")
+        self.expr_p = p / p.sum()
+
+    def base(self, seed: int):
+        """The identity of ``seed`` with its shapes (``data_synth.makehuman.BaseHeadRig``)."""
+        from data_synth.makehuman import base_head_rig, sample_head_identity
+
+        rng = np.random.default_rng([seed, 31])
+        kind = self.expr_kinds[int(rng.choice(len(self.expr_kinds), p=self.expr_p))]
+        ident = sample_head_identity(seed, self.split, float(self.cfg["stylised_share"]))
+        return base_head_rig(ident, kind, seed if self.cfg["style"] else None)
+
+    def rig(self, base, spec_index: int, tess_seed: int, n_segments: int):
+        """``base`` on tessellation ``spec_index`` of the list."""
+        from data_synth.makehuman import build_head_rig, head_tessellation
+
+        return build_head_rig(base, head_tessellation(seed=tess_seed, **self.specs[spec_index]),
+                              n_segments)
 
 
 def random_rotation(rng: np.random.Generator, max_deg: float) -> np.ndarray:
@@ -91,7 +145,10 @@ def random_rotation(rng: np.random.Generator, max_deg: float) -> np.ndarray:
 class TargetPool:
     """The deterministic pool of prepared training identities (see the module docstring).
 
-    data_cfg: the ``data`` section of a training config; model_cfg: nets.model.NFSConfig.
+    data_cfg: the ``data`` section of a training config; model_cfg: nets.model.NFSConfig. Each
+    identity index belongs to one rig source, drawn with the shares of ``data.sources``:
+    procedural (u, v) heads on ``data.tessellations``, or realistic MakeHuman heads
+    (``data.makehuman``).
     """
 
     def __init__(self, data_cfg: dict, model_cfg, seed: int, split: str = "train"):
@@ -100,7 +157,16 @@ class TargetPool:
         self.seed = int(seed)
         self.split = split
         self.tess_specs = list(data_cfg["tessellations"])
+        self.shares = source_shares(data_cfg)
+        self.makehuman = MakeHumanRigs(data_cfg["makehuman"], split) if self.shares[1] > 0 else None
         self._slots: dict[int, tuple[tuple, tuple[Entry, Entry]]] = {}
+
+    def identity_source(self, identity: int) -> str:
+        """The rig source of identity index ``identity`` (a pure function of seed and index)."""
+        if self.shares[1] <= 0:
+            return "procedural"
+        rng = np.random.default_rng([self.seed, identity, 13])
+        return RIG_SOURCES[int(rng.random() < self.shares[1])]
 
     def slot_key(self, slot: int, step: int) -> tuple[int, int, int]:
         """(identity index, tessellation a, tessellation b) held by ``slot`` at ``step``."""
@@ -108,7 +174,9 @@ class TargetPool:
         generation = (step + slot * refresh) // (size * refresh)
         identity = (slot + size * generation) % self.cfg["n_identities"]
         rng = np.random.default_rng([self.seed, identity, generation, 7])
-        a, b = rng.choice(len(self.tess_specs), size=2, replace=len(self.tess_specs) < 2)
+        n = len(self.tess_specs if self.identity_source(identity) == "procedural"
+                else self.makehuman.specs)
+        a, b = rng.choice(n, size=2, replace=n < 2)
         return int(identity), int(a), int(b)
 
     def slot(self, slot: int, step: int) -> tuple[Entry, Entry]:
@@ -117,11 +185,20 @@ class TargetPool:
         cached = self._slots.get(slot)
         if cached is None or cached[0] != key:
             identity_index, a, b = key
-            identity = sample_identity(self.seed * 1_000_003 + identity_index, split=self.split)
-            entries = tuple(
-                prepare_entry(identity, self.tess_specs[t], tess_seed=identity_index * 2 + i,
-                              model_cfg=self.model_cfg, n_segments=self.model_cfg.n_segments)
-                for i, t in enumerate((a, b)))
+            seed = self.seed * 1_000_003 + identity_index
+            n_seg = self.model_cfg.n_segments
+            if self.identity_source(identity_index) == "procedural":
+                identity = sample_identity(seed, split=self.split)
+                entries = tuple(
+                    prepare_entry(identity, self.tess_specs[t], tess_seed=identity_index * 2 + i,
+                                  model_cfg=self.model_cfg, n_segments=n_seg)
+                    for i, t in enumerate((a, b)))
+            else:
+                base = self.makehuman.base(seed)
+                entries = tuple(
+                    prepare_rig(self.makehuman.rig(base, t, identity_index * 2 + i, n_seg),
+                                self.model_cfg)
+                    for i, t in enumerate((a, b)))
             self._slots[slot] = (key, entries)
         return self._slots[slot][1]
 
@@ -145,6 +222,9 @@ class TargetPool:
             else:
                 other = (t_slot + 1 + int(rng.integers(size - 1))) % size if size > 1 else t_slot
                 entry = self.slot(other, step)[int(rng.integers(2))]
+            for present in (target.present, entry.present):   # shapes a rig lacks stay at 0
+                if present is not None:
+                    w *= present
             sources.append(make_source(entry, w, kind, rng, self.cfg.get("augment", {}),
                                        self.model_cfg))
         return Group(target, sources, ground_truth(weights, target))
@@ -219,13 +299,25 @@ def make_pool(data_cfg: dict, model_cfg, seed: int):
 
 
 def validation_entries(data_cfg: dict, model_cfg, seed: int) -> list[tuple[Entry, np.ndarray]]:
-    """Fixed validation set: ``val_identities`` held-out identities (split "val") on the first
-    tessellation, each with ``val_expressions`` fixed weight vectors (53,)."""
+    """Fixed validation set: ``val_identities`` held-out identities (split "val"), each with
+    ``val_expressions`` fixed weight vectors (53,). With both rig sources in ``data.sources`` they
+    alternate (procedural first), each on the first tessellation of its list."""
+    shares = source_shares(data_cfg)
+    both = shares.min() > 0
+    makehuman = MakeHumanRigs(data_cfg["makehuman"], "val") if shares[1] > 0 else None
     out = []
     for i in range(data_cfg["val_identities"]):
-        entry = prepare_entry(sample_identity(seed * 1_000_003 + i, split="val"),
-                              data_cfg["tessellations"][0], tess_seed=10_000 + i,
-                              model_cfg=model_cfg, n_segments=model_cfg.n_segments)
+        ident_seed = seed * 1_000_003 + i
+        if makehuman is None or (both and i % 2 == 0):
+            entry = prepare_entry(sample_identity(ident_seed, split="val"),
+                                  data_cfg["tessellations"][0], tess_seed=10_000 + i,
+                                  model_cfg=model_cfg, n_segments=model_cfg.n_segments)
+        else:
+            rig = makehuman.rig(makehuman.base(ident_seed), 0, 10_000 + i, model_cfg.n_segments)
+            entry = prepare_rig(rig, model_cfg)
         rng = np.random.default_rng([seed, 99, i])
-        out.append((entry, sample_weights(rng, data_cfg["val_expressions"], mode="mixed")))
+        weights = sample_weights(rng, data_cfg["val_expressions"], mode="mixed")
+        if entry.present is not None:
+            weights = weights * entry.present
+        out.append((entry, weights))
     return out

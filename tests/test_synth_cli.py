@@ -4,7 +4,6 @@ import pytest
 import yaml
 
 from data_synth.dataset import ShardReader
-from data_synth.identity import mean_identity
 from retarget.calibrate import DEFAULT_RIG, compare, markdown_table, shape_stats, summary
 from retarget.cli import main
 
@@ -55,10 +54,14 @@ def test_calibration_table_against_the_real_rig():
 def test_preview_sheets_render():
     pytest.importorskip("moderngl")
     from retarget import synth_preview
+    from retarget.render import Renderer
     try:
-        img = synth_preview.shapes_sheet(mean_identity(), n_vertices=600, size=48)
+        Renderer(8)
     except Exception as e:   # no EGL on this machine
         pytest.skip(f"offscreen rendering unavailable: {e}")
-    assert img.ndim == 3 and img.shape[2] == 3 and img.max() > 0.5
-    seg = synth_preview.segments_sheet(mean_identity(), n_vertices=600, size=48)
-    assert seg.shape[2] == 3
+    for source in synth_preview.SOURCES:
+        rig = synth_preview.preview_rig(source, 0, n_vertices=600, crop="face")
+        img = synth_preview.shapes_sheet(rig, size=48)
+        assert img.ndim == 3 and img.shape[2] == 3 and img.max() > 0.5
+        seg = synth_preview.segments_sheet(source, 0, n_vertices=600, size=48)
+        assert seg.shape[2] == 3 and seg.max() > 0.5

@@ -7,7 +7,8 @@ from pathlib import Path
 HELP = "synthesise a procedural FACS rig dataset (sharded npz) or PNG previews of the rigs"
 EXAMPLE = """retarget synth --config configs/synth/default.yaml --out data/synth
 retarget synth --config configs/synth/tiny.yaml --out /tmp/tiny --overwrite
-retarget synth --preview --out previews --identity-seed 3"""
+retarget synth --preview --out previews --identity-seed 3
+retarget synth --preview --source procedural --out previews_uv"""
 
 
 
@@ -20,6 +21,8 @@ def add_arguments(p):
                    help="write PNG contact sheets instead of a dataset")
     p.add_argument("--identity-seed", type=int, default=0,
                    help="preview: the test identity whose 53 shapes are shown (default 0)")
+    p.add_argument("--source", choices=("makehuman", "procedural"), default="makehuman",
+                   help="preview: realistic MakeHuman heads (default) or procedural (u, v) heads")
     p.add_argument("--overwrite", action="store_true",
                    help="replace a dataset already in --out (default: refuse)")
 
@@ -33,7 +36,8 @@ def run(args) -> int:
     if args.preview:
         from ..synth_preview import write_previews
 
-        for path in write_previews(out, identity_seed=args.identity_seed):
+        for path in write_previews(out, identity_seed=args.identity_seed,
+                                   source=args.source):
             print(path)
         return 0
 

@@ -1,0 +1,76 @@
+"""Training on the mix of procedural and realistic (MakeHuman) rigs."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from retarget.errors import RetargetError
+from retarget.train import Trainer, load_config
+from retarget.training_data import TargetPool, validation_entries
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def mix_cfg(share=0.5, expressions=None):
+    cfg = load_config(ROOT / "configs" / "train" / "tiny.yaml")
+    cfg["data"]["sources"] = {"procedural": 1.0 - share, "makehuman": share}
+    cfg["data"]["makehuman"]["tessellations"] = [
+        {"n_vertices": 400, "kind": "decimated", "crop": "face"},
+        {"n_vertices": 500, "kind": "jittered", "crop": "bust"}]
+    if expressions:
+        cfg["data"]["makehuman"]["expressions"] = expressions
+    return cfg
+
+
+def test_pool_draws_both_sources_with_exact_ground_truth():
+    cfg = mix_cfg(0.5)
+    from retarget.train import model_cfg
+    pool = TargetPool(cfg["data"], model_cfg(cfg), seed=0)
+    kinds = {pool.identity_source(i) for i in range(8)}
+    assert kinds == {"procedural", "makehuman"}
+    slot = next(s for s in range(cfg["data"]["pool_size"])
+                if pool.identity_source(pool.slot_key(s, 0)[0]) == "makehuman")
+    a, b = pool.slot(slot, 0)
+    assert a.rig.uv is None and a.rig.identity is None and a.present.all()
+    assert a.rig.correspondence.shape[1] == b.rig.correspondence.shape[1]
+    g1, g2 = pool.sample(3), pool.sample(3)
+    assert np.array_equal(g1.gt_dv, g2.gt_dv)          # deterministic: resume is exact
+    w = np.stack([s.weights for s in g1.sources])
+    assert np.allclose(g1.gt_dv, np.einsum("sk,kvc->svc", w, g1.target.basis), atol=1e-5)
+
+
+def test_units_rigs_zero_the_shapes_they_lack():
+    cfg = mix_cfg(1.0, {"arkit": 0.0, "units": 1.0})
+    from retarget.train import model_cfg
+    pool = TargetPool(cfg["data"], model_cfg(cfg), seed=0)
+    group = pool.sample(0)
+    assert group.target.present is not None and not group.target.present.all()
+    for s in group.sources:
+        assert np.all(s.weights[~group.target.present] == 0)
+    val = validation_entries(cfg["data"], model_cfg(cfg), seed=0)
+    assert all(np.all(w[:, ~e.present] == 0) for e, w in val)
+
+
+def test_bad_source_shares_are_refused():
+    cfg = mix_cfg(0.5)
+    cfg["data"]["sources"] = {"procedural": 0.0, "scans": 1.0}
+    from retarget.train import model_cfg
+    with pytest.raises(RetargetError, match="data.sources"):
+        TargetPool(cfg["data"], model_cfg(cfg), seed=0)
+
+
+def test_a_few_mixed_training_steps_run(tmp_path):
+    cfg = mix_cfg(0.5)
+    cfg["train"]["steps"] = 3
+    Trainer(cfg, tmp_path, progress=False).run()
+    assert (tmp_path / "model.pt").is_file()
+    log = (tmp_path / "train_log.csv").read_text()
+    assert "val_mse_mm2" in log.splitlines()[0]
+
+
+def test_shipped_mix_configs_load():
+    for name in ("mix", "mix_no_arkit"):
+        cfg = load_config(ROOT / "configs" / "train" / f"{name}.yaml")
+        assert cfg["data"]["sources"]["makehuman"] == 0.5
+    withheld = load_config(ROOT / "configs" / "train" / "mix_no_arkit.yaml")
+    assert withheld["data"]["makehuman"]["expressions"] == {"arkit": 0.0, "units": 1.0}
