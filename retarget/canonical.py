@@ -32,6 +32,7 @@ FRAMES = ("bbox", "face")
 
 # ---- the face frame (fit_face_frame); lengths relative to the mesh's own size
 HEAD_WINDOW_GAIN = 1.3    # head window depth below the top = gain × the window's x extent
+WINDOW_START = 0.05       # ... grown from this fraction of the mesh's height (past a flat crown)
 GRID_CELLS = 96            # height-field cells along the head window's depth
 SAMPLE_SPACING = 0.5      # triangle samples per height-field cell side: spacing = 0.5 cell
 FRONT_COS = 0.5           # the face front: surface normals within 60° of +z (cos 60° = 0.5) ...
@@ -109,8 +110,9 @@ class Canonicaliser:
 
 # ------------------------------------------------------------------------------------- face frame
 def head_window_depth(vertices: np.ndarray) -> float:
-    """Depth d below the mesh's top (max y) of the head window: the least d with
-    d = HEAD_WINDOW_GAIN × (x extent of the vertices less than d below the top).
+    """Depth d below the mesh's top (max y) of the head window: the fixed point of
+    d <- HEAD_WINDOW_GAIN × (x extent of the vertices less than d below the top), grown from
+    d = WINDOW_START × the mesh's height.
 
     Growing the window from the top, the head widens faster than the window deepens until the ears;
     then the x extent stops growing and the window stops about one head width below the crown, above
@@ -120,10 +122,13 @@ def head_window_depth(vertices: np.ndarray) -> float:
     depth = depth[0] - depth                                     # ascending
     x = vertices[order, 0]
     ext = np.maximum.accumulate(x) - np.minimum.accumulate(x)   # extent of the first i+1 vertices
-    nxt = np.append(depth[1:], np.inf)
-    want = HEAD_WINDOW_GAIN * ext
-    i = int(np.flatnonzero((ext > 0) & (want < nxt))[0])         # K·E(d) − d first ≤ 0 here
-    return float(max(want[i], depth[i]))
+    d = WINDOW_START * depth[-1]
+    for _ in range(1000):
+        grown = HEAD_WINDOW_GAIN * ext[np.searchsorted(depth, d, side="right") - 1]
+        if grown <= d:
+            break
+        d = grown
+    return float(d)
 
 
 def surface_samples(vertices: np.ndarray, faces: np.ndarray,

@@ -20,11 +20,18 @@ number below has exact ground truth unless a table says otherwise:
   real → procedural (GT = the other rig driven by the same FACS weights: *semantic*, not exact,
   because two artists' shapes of one name differ), per ARKit shape (one-hot) and on sampled weights.
 
+- ``head_self``, ``head_cross_identity``, ``head_cross_topology``, ``head_cross_crop``: realistic
+  held-out heads (``data_synth.makehuman``: ``sample_head_identity(seed + i, split="test")``, the
+  artist's ARKit shapes carried onto each by deformation transfer, ``head_tessellation`` crops and
+  remeshes; the ``heads`` section of the config), exact GT as for the procedural suites: one
+  identity on one tessellation; identity i -> i+1; i -> i+1 across tessellations; and one identity
+  across crops (bust -> head, face mask -> bust). Shapes an identity lacks get weight 0.
 - ``frame``: no method, the canonical frames themselves (``retarget.canonical``): the MakeHuman head
   of ``data_synth/makehuman/data`` as face mask, head, head with eye sockets and mouth cavity, and
   bust (:func:`makehuman_crops`), and each test identity's procedural full head against its face
   crop: the scale of each crop relative to the reference and how far its canonical origin moves
-  (mm), for the bounding-box and the face frame.
+  (mm), for the bounding-box and the face frame; and the same for each realistic test head
+  (``heads``) as face, head, head_neck and bust crops.
 
 Every transfer suite also reports the segment-averaged MSE of NFS Table 1 (mean over the L = 20
 segments of each segment's MSE) and the per-segment MSE. Errors are in mm² (``retarget.metrics``).
@@ -71,8 +78,11 @@ from .smoothing import FILTERS, smooth_codes
 
 #: Suite names; a suite's index seeds its weights, so new suites go at the end.
 SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig", "animate",
-          "frame")
-TRANSFER_SUITES = ("self", "cross_identity", "cross_topology")
+          "frame", "head_self", "head_cross_identity", "head_cross_topology", "head_cross_crop")
+TRANSFER_SUITES = ("self", "cross_identity", "cross_topology", "head_self", "head_cross_identity",
+                   "head_cross_topology", "head_cross_crop")
+#: Transfer suites whose cases come in named pairs of tessellations or crops (a column each).
+PAIRED_SUITES = ("cross_topology", "head_cross_topology", "head_cross_crop")
 REPO_ROOT = Path(__file__).resolve().parents[1]
 ORACLE_NAME = "oracle (u,v)"
 DO_NOTHING_NAME = "do nothing"
@@ -236,6 +246,7 @@ class EvalData:
         self._rigs: dict = {}
         self._tess: dict = {}
         self._real = None
+        self._head_bases: dict = {}
 
     def tessellation(self, spec: dict):
         key = tuple(sorted(spec.items()))
@@ -250,6 +261,22 @@ class EvalData:
         if key not in self._rigs:
             z_id = sample_identity(self.cfg["seed"] + identity, split="test")
             self._rigs[key] = build_rig(z_id, self.tessellation(spec), self.cfg["n_segments"])
+        return self._rigs[key]
+
+    def head_rig(self, identity: int, spec: dict | None = None):
+        """The realistic rig of test head ``identity`` on ``head_tessellation(**spec)`` (default:
+        the config's ``heads.tessellation``); the identity's shapes are made once."""
+        from data_synth.makehuman import base_head_rig, build_head_rig, head_tessellation, sample_head_identity
+
+        h = self.cfg["heads"]
+        spec = spec or h["tessellation"]
+        if identity not in self._head_bases:
+            z = sample_head_identity(self.cfg["seed"] + identity, split="test")
+            self._head_bases[identity] = base_head_rig(z, h["shapes"])
+        key = ("head", identity, tuple(sorted(spec.items())))
+        if key not in self._rigs:
+            tess = head_tessellation(seed=self.cfg["seed"], **spec)
+            self._rigs[key] = build_head_rig(self._head_bases[identity], tess, self.cfg["n_segments"])
         return self._rigs[key]
 
     def weights(self, suite: str, index: int, n: int | None = None) -> np.ndarray:
@@ -290,7 +317,32 @@ class EvalData:
                 out.append(Case(f"id {i} -> id {(i + 1) % n}", self.rig(i), w,
                                 self.rig((i + 1) % n), w))
             return out
+        if suite.startswith("head_"):
+            return self.head_cases(suite)
         raise ValueError(f"no generic cases for suite {suite!r}")
+
+    def head_cases(self, suite: str) -> list[Case]:
+        """The cases of a realistic-head suite (see the module docstring)."""
+        h = self.cfg["heads"]
+        n = h["identities"]
+
+        def case(label, src, tgt, index):
+            w = self.weights(suite, index, h["expressions"]) * (src.present & tgt.present)
+            return Case(label, src, w.astype(np.float32), tgt, w.astype(np.float32))
+
+        if suite == "head_self":
+            return [case(f"head {i}", self.head_rig(i), self.head_rig(i), i) for i in range(n)]
+        if suite == "head_cross_identity":
+            return [case(f"head {i} -> head {(i + 1) % n}", self.head_rig(i), self.head_rig((i + 1) % n), i)
+                    for i in range(n)]
+        kind = "topology" if suite == "head_cross_topology" else "crop"
+        out = []
+        for p, pair in enumerate(h[f"cross_{kind}"]):
+            for i in range(h[f"cross_{kind}_identities"]):
+                j = (i + 1) % n if kind == "topology" else i
+                out.append(case(f"{pair['name']}: head {i} -> head {j}", self.head_rig(i, pair["source"]),
+                                self.head_rig(j, pair["target"]), p * 1000 + i))
+        return out
 
     def real_cases(self) -> dict[str, dict[str, Case]]:
         """Real-rig cases by direction, each as one case of sampled weights and one of one-hot
@@ -504,7 +556,7 @@ class Evaluation:
                     keep[i][m.name] = pred[0]
             if errs:
                 res["methods"][m.name] = summarise(errs)
-                if suite == "cross_topology":
+                if suite in PAIRED_SUITES:
                     res["methods"][m.name]["pairs"] = {g: summarise(v) for g, v in by_group.items()}
         self.samples += [(suite, c, k) for c, k in zip(cases, keep)]
         return res
@@ -517,6 +569,18 @@ class Evaluation:
 
     def suite_cross_topology(self) -> dict:
         return self._transfer_suite("cross_topology")
+
+    def suite_head_self(self) -> dict:
+        return self._transfer_suite("head_self")
+
+    def suite_head_cross_identity(self) -> dict:
+        return self._transfer_suite("head_cross_identity")
+
+    def suite_head_cross_topology(self) -> dict:
+        return self._transfer_suite("head_cross_topology")
+
+    def suite_head_cross_crop(self) -> dict:
+        return self._transfer_suite("head_cross_crop")
 
     def suite_animate(self) -> dict:
         """Driving from FACS weights: the ``self`` cases (same targets, same weights) decoded from
@@ -580,6 +644,12 @@ class Evaluation:
             res["procedural"][f"id {i}"] = frame_agreement(
                 {"full": (full.neutral, full.faces), "face crop": (face.neutral, face.faces)},
                 "full")
+        res["heads"] = {}
+        for i in range(self.cfg["heads"]["identities"]):
+            rigs = {crop: self.data.head_rig(i, {"n_vertices": 3386, "kind": "base", "crop": crop})
+                    for crop in ("face", "head", "head_neck", "bust")}
+            res["heads"][f"head {i}"] = frame_agreement(
+                {c: (r.neutral, r.faces) for c, r in rigs.items()}, "head")
         return res
 
     def suite_real_rig(self) -> dict:
@@ -701,13 +771,15 @@ def to_markdown(results: dict) -> str:
         return fmt_ratio(get(suite, m, *keys), dig(s.get(suite, {}).get("ratios", {}).get(m), keys))
 
     for suite, title in (("self", "Self-retargeting"), ("cross_identity", "Cross-identity"),
-                         ("cross_topology", "Cross-topology")):
+                         ("cross_topology", "Cross-topology"),
+                         ("head_self", "Realistic heads: self-retargeting"),
+                         ("head_cross_identity", "Realistic heads: cross-identity"),
+                         ("head_cross_topology", "Realistic heads: cross-topology"),
+                         ("head_cross_crop", "Realistic heads: cross-crop")):
         if suite not in s:
             continue
         out.append(f"### {title} (exact GT; MSE in mm², segment-averaged as NFS Table 1)\n")
-        groups = []
-        if suite == "cross_topology":
-            groups = list(dict.fromkeys(p["name"] for p in results["config"]["cross_topology"]))
+        groups = list(dict.fromkeys(g for v in s[suite]["methods"].values() for g in v.get("pairs", {})))
         header = ["method", "MSE", "segment-avg MSE"] + [f"{g} (MSE / seg)" for g in groups]
         rows = [[m, cell(suite, m, "mse_mm2"), cell(suite, m, "seg_mse_mm2")]
                 + [f"{cell(suite, m, 'pairs', g, 'mse_mm2')} / {cell(suite, m, 'pairs', g, 'seg_mse_mm2')}"
@@ -777,6 +849,14 @@ def to_markdown(results: dict) -> str:
                        for k in FRAMES] for i, p in f["procedural"].items()]
         out.append(md_table(["identity"] + [f"{k} frame: scale ratio / shift (mm)" for k in FRAMES],
                             rows) + "\n")
+        if f.get("heads"):
+            crops = [c for c in next(iter(f["heads"].values()))[FRAMES[0]] if c != "head"]
+            out.append("Realistic test heads (data_synth.makehuman, base tessellation), each crop "
+                       "against the head crop:\n")
+            rows = [[i] + [" · ".join(f"{p[k][c]['scale_ratio']:.3f} / {p[k][c]['centre_mm']:.1f}"
+                                      for c in crops) for k in FRAMES] for i, p in f["heads"].items()]
+            out.append(md_table(["head"] + [f"{k} frame ({', '.join(crops)}): scale ratio / shift (mm)"
+                                            for k in FRAMES], rows) + "\n")
     return "\n".join(out)
 
 

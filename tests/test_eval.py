@@ -13,7 +13,7 @@ from data_synth.tessellate import tessellate
 from nets.model import NFSConfig, NFSModel
 from retarget.cli import main
 from retarget.errors import RetargetError
-from retarget.evaluate import (SUITES, ClosestPointMethod, DoNothingMethod, Evaluation, OracleMethod,
+from retarget.evaluate import (SUITES, TRANSFER_SUITES, ClosestPointMethod, DoNothingMethod, Evaluation, OracleMethod,
                                RealRig, EvalData, arkit_ict_matrix,
                                case_errors, ict_to_arkit_weights, load_eval_config,
                                parse_checkpoints, summarise, to_markdown)
@@ -204,6 +204,12 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
         assert (ratio["raw"] if suite == "jitter" else ratio)["mse_mm2"] == 1.0
     assert res["suites"]["self"]["methods"]["oracle (u,v)"]["mse_mm2"] < 1e-8
     assert res["suites"]["self"]["methods"]["closest point"]["mse_mm2"] < 1e-8
+    for suite in ("head_self", "head_cross_identity", "head_cross_topology", "head_cross_crop"):
+        assert set(res["suites"][suite]["methods"]) == {"full", "noskin", "do nothing",
+                                                        "closest point"}, suite   # no (u, v)
+    assert res["suites"]["head_self"]["methods"]["closest point"]["mse_mm2"] < 1e-8
+    assert "bust->head" in res["suites"]["head_cross_crop"]["methods"]["full"]["pairs"]
+    assert len(res["suites"]["head_self"]["methods"]["full"]["per_segment_mm2"]) == 20
     assert res["suites"]["self"]["methods"]["full"]["mse_mm2"] > 0
     assert set(res["suites"]["animate"]["methods"]) == {"full", "noskin", "do nothing"}
     assert res["suites"]["animate"]["methods"]["full"]["mse_mm2"] > 0
@@ -223,10 +229,11 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     md = (out / "eval.md").read_text()
     for title in ("Self-retargeting", "Cross-identity", "Cross-topology", "Inverse rigging",
                   "Jitter", "Real ARKit rig", "Driving from FACS weights", "| full |",
-                  "| oracle (u,v) |", "| do nothing | ", "(1.00×)", "Canonical frame under crops"):
+                  "| oracle (u,v) |", "| do nothing | ", "(1.00×)", "Canonical frame under crops",
+                  "Realistic heads: cross-crop", "Realistic test heads"):
         assert title in md
     pngs = sorted(heat.glob("*.png"))
-    assert len(pngs) == 3 and all(p.stat().st_size > 100 for p in pngs)
+    assert len(pngs) == len(TRANSFER_SUITES) and all(p.stat().st_size > 100 for p in pngs)
 
 
 def test_real_rig_self_retargeting_ground_truth_is_exact():
