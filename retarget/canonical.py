@@ -160,12 +160,11 @@ def front_height_field(points: np.ndarray, nz: np.ndarray, lo: np.ndarray, cell:
     ok = ((ij >= 0) & (ij < np.array(shape))).all(axis=1)
     key = ij[ok, 0] * shape[1] + ij[ok, 1]
     z, nz = points[ok, 2], nz[ok]
-    order = np.lexsort((z, key))
-    last = np.append(key[order][1:] != key[order][:-1], True)      # the front-most sample per cell
     height = np.full(shape[0] * shape[1], -np.inf)
+    np.maximum.at(height, key, z)
+    front = z == height[key]                                        # the front-most sample(s)
     front_nz = np.zeros(shape[0] * shape[1])
-    height[key[order][last]] = z[order][last]
-    front_nz[key[order][last]] = nz[order][last]
+    np.maximum.at(front_nz, key[front], nz[front])
     return height.reshape(shape), front_nz.reshape(shape)
 
 

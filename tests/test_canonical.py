@@ -147,3 +147,22 @@ def test_face_frame_model_renders_the_face_box_whatever_the_crop():
     face_diff = np.abs(img["head", "face"] - img["bust", "face"])[:, :20].mean()   # the face rows
     bbox_diff = np.abs(img["head", "bbox"] - img["bust", "bbox"])[:, :20].mean()
     assert face_diff < 0.3 * bbox_diff
+
+
+def test_a_face_frame_model_prepares_and_transfers_in_any_units():
+    """A model whose config says canonical: face canonicalises its targets and sources that way."""
+    import torch
+
+    from nets.model import NFSConfig, NFSModel
+    from retarget.api import Retargeter
+    from retarget.mesh import Mesh
+
+    torch.manual_seed(0)
+    r = Retargeter(NFSModel(NFSConfig.preset("tiny", canonical="face")), device="cpu")
+    v, f = procedural(1, 700, "regular", "full")
+    target = r.prepare(Mesh(v, f))
+    assert target.proxy.canon.kind == "face"
+    frame = Mesh(v + 0.1, f)
+    cm = r.transfer(frame, target, source_neutral=Mesh(v, f))
+    mm = r.transfer(Mesh(frame.vertices * 10, f), Mesh(v * 10 + 3.0, f), source_neutral=Mesh(v * 10, f))
+    assert np.allclose(mm, cm * 10 + 3.0, atol=1e-3)
