@@ -184,7 +184,7 @@ def test_without_usd_core_a_usd_output_is_one_line_error(files, tmp_path, rig, m
 
 
 @needs_usd
-def test_export_rig_usd_holds_the_baked_rig_with_the_glb_names(files, tmp_path):  # noqa: F811
+def test_export_rig_usd_holds_the_baked_rig_with_the_glb_names(files, tmp_path, capsys):  # noqa: F811
     target = load_mesh(files / "target.obj")
     baked = api(files).bake(target)
     assert run("export-rig", files / "target.obj", "-o", tmp_path / "rig.usda", files=files) == 0
@@ -210,6 +210,13 @@ def test_export_rig_usd_holds_the_baked_rig_with_the_glb_names(files, tmp_path):
     u = read_usd(tmp_path / "z.usda")
     assert u["up"] == "Z" and np.allclose(u["points"], baked.neutral @ to_file, atol=1e-4)
     assert np.allclose(u["offsets"], baked.deltas @ to_file, atol=1e-4)
+    # an x-up copy: USD cannot declare +x up, so the rig is written in the project frame, +y up
+    save_mesh(tmp_path / "tgt_x.obj", target.vertices @ axis_rotation("+x", "+z"), target.faces)
+    capsys.readouterr()
+    assert run("export-rig", tmp_path / "tgt_x.obj", "-o", tmp_path / "x.usda", "--up", "+x", files=files) == 0
+    assert "the rig is written +y up" in capsys.readouterr().err
+    u = read_usd(tmp_path / "x.usda")
+    assert u["up"] == "Y" and np.allclose(u["points"], baked.neutral, atol=1e-4)
 
 
 @needs_usd
