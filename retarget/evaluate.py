@@ -15,10 +15,6 @@ number below has exact ground truth unless a table says otherwise:
   weights it splits the error between the expression encoder and the decoder.
 - ``jitter``: cross-identity transfer of a smooth weight sequence: the mean norm of the second
   difference of the vertex positions (mm), prediction vs GT, raw and with each temporal filter.
-- ``mh_self``, ``mh_cross_identity``, ``mh_cross_topology``, ``mh_cross_crop`` (bust -> head,
-  face mask -> bust, ...), ``mh_inverse``, ``mh_animate``: the same on realistic MakeHuman heads of
-  held-out identities (``sample_head_identity(i, split="test")``, the artist's ARKit shapes carried
-  by deformation transfer, as authored: no style), exact GT through the base-vertex correspondence.
 - ``real_rig``: the artist-made ARKit rig ``makehuman_arkit.npz`` (one MakeHuman identity):
   real → real self-retargeting and inversion of its frames (exact GT), procedural → real and
   real → procedural (GT = the other rig driven by the same FACS weights: *semantic*, not exact,
@@ -55,16 +51,9 @@ from .metrics import segment_mse_mm2, second_difference_jitter_mm, squared_error
 from .oracle import displacement_transfer, uv_transfer_matrix
 from .smoothing import FILTERS, smooth_codes
 
-#: Suite names; a suite's index seeds its weights, so new suites go at the end. ``mh_*``: the same
-#: suites on realistic held-out MakeHuman heads (config section ``realistic``).
-SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig", "animate",
-          "mh_self", "mh_cross_identity", "mh_cross_topology", "mh_cross_crop", "mh_inverse",
-          "mh_animate")
-TRANSFER_SUITES = ("self", "cross_identity", "cross_topology", "mh_self", "mh_cross_identity",
-                   "mh_cross_topology", "mh_cross_crop")
-#: suites whose cases are named "pair: ..." from a list of tessellation pairs in the config
-PAIR_SUITES = {"cross_topology": ("cross_topology",), "mh_cross_topology": ("realistic", "cross_topology"),
-               "mh_cross_crop": ("realistic", "cross_crop")}
+#: Suite names; a suite's index seeds its weights, so new suites go at the end.
+SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig", "animate")
+TRANSFER_SUITES = ("self", "cross_identity", "cross_topology")
 REPO_ROOT = Path(__file__).resolve().parents[1]
 ORACLE_NAME = "oracle (u,v)"
 
@@ -85,12 +74,7 @@ def load_eval_config(path=None) -> dict:
 
 
 def real_rig_path(cfg: dict) -> Path:
-    """The eval config's real rig: ``real_rig.path``, relative to the repository root; "packaged"
-    is the copy of ``makehuman_arkit.npz`` shipped in ``data_synth/makehuman/data/``."""
-    if cfg["real_rig"]["path"] == "packaged":
-        from data_synth.makehuman.assets import DATA_DIR
-
-        return DATA_DIR / "makehuman_arkit.npz"
+    """The eval config's real rig: ``real_rig.path``, relative to the repository root."""
     return REPO_ROOT / cfg["real_rig"]["path"]
 
 
@@ -208,23 +192,6 @@ class EvalData:
         rng = np.random.default_rng([self.cfg["seed"], SUITES.index(suite), index])
         return sample_weights(rng, n or self.cfg["expressions"], self.cfg["weights_mode"]).astype(np.float32)
 
-    def mh_rig(self, identity: int, spec: dict | None = None):
-        """The realistic rig of held-out MakeHuman identity ``identity`` on ``spec``
-        (``head_tessellation`` arguments; default: ``realistic.tessellation``)."""
-        from data_synth.makehuman import base_head_rig, build_head_rig, head_tessellation
-        from data_synth.makehuman import sample_head_identity
-
-        spec = spec or self.cfg["realistic"]["tessellation"]
-        key = ("mh", identity, tuple(sorted(spec.items())))
-        if key not in self._rigs:
-            base_key = ("mh_base", identity)
-            if base_key not in self._rigs:
-                self._rigs[base_key] = base_head_rig(
-                    sample_head_identity(self.cfg["seed"] + identity, "test"), "arkit")
-            tess = head_tessellation(seed=self.cfg["seed"], **spec)
-            self._rigs[key] = build_head_rig(self._rigs[base_key], tess, self.cfg["n_segments"])
-        return self._rigs[key]
-
     def real_rig(self) -> RealRig:
         if self._real is None:
             self._real = RealRig.load(real_rig_path(self.cfg))
@@ -258,30 +225,7 @@ class EvalData:
                 out.append(Case(f"id {i} -> id {(i + 1) % n}", self.rig(i), w,
                                 self.rig((i + 1) % n), w))
             return out
-        if suite.startswith("mh_"):
-            return self.mh_cases(suite)
         raise ValueError(f"no generic cases for suite {suite!r}")
-
-    def mh_cases(self, suite: str) -> list[Case]:
-        """Cases of the realistic suites: as their procedural twins, on MakeHuman test heads."""
-        r = self.cfg["realistic"]
-        n = r["identities"]
-        w = lambda i: self.weights(suite, i, r["expressions"])        # noqa: E731
-        if suite in ("mh_self", "mh_inverse", "mh_animate"):
-            own = "mh_self" if suite == "mh_animate" else suite      # animate: the self cases
-            return [Case(f"id {i}", self.mh_rig(i), wi, self.mh_rig(i), wi)
-                    for i in range(n) for wi in [self.weights(own, i, r["expressions"])]]
-        if suite == "mh_cross_identity":
-            return [Case(f"id {i} -> id {(i + 1) % n}", self.mh_rig(i), wi, self.mh_rig((i + 1) % n), wi)
-                    for i in range(n) for wi in [w(i)]]
-        out = []
-        for p, pair in enumerate(r[PAIR_SUITES[suite][1]]):
-            for i in range(r["pair_identities"]):
-                wi = w(p * 1000 + i)
-                out.append(Case(f"{pair['name']}: id {i} -> id {(i + 1) % n}",
-                                self.mh_rig(i, pair["source"]), wi,
-                                self.mh_rig((i + 1) % n, pair["target"]), wi))
-        return out
 
     def real_cases(self) -> dict[str, dict[str, Case]]:
         """Real-rig cases by direction, each as one case of sampled weights and one of one-hot
@@ -461,7 +405,7 @@ class Evaluation:
                     keep[i][m.name] = pred[0]
             if errs:
                 res["methods"][m.name] = summarise(errs)
-                if suite in PAIR_SUITES:
+                if suite == "cross_topology":
                     res["methods"][m.name]["pairs"] = {g: summarise(v) for g, v in by_group.items()}
         self.samples += [(suite, c, k) for c, k in zip(cases, keep)]
         return res
@@ -475,32 +419,13 @@ class Evaluation:
     def suite_cross_topology(self) -> dict:
         return self._transfer_suite("cross_topology")
 
-    def suite_mh_self(self) -> dict:
-        return self._transfer_suite("mh_self")
-
-    def suite_mh_cross_identity(self) -> dict:
-        return self._transfer_suite("mh_cross_identity")
-
-    def suite_mh_cross_topology(self) -> dict:
-        return self._transfer_suite("mh_cross_topology")
-
-    def suite_mh_cross_crop(self) -> dict:
-        return self._transfer_suite("mh_cross_crop")
-
-    def suite_mh_inverse(self) -> dict:
-        return self.suite_inverse("mh_inverse")
-
-    def suite_mh_animate(self) -> dict:
-        return self.suite_animate("mh_animate")
-
-    def suite_animate(self, suite: str = "animate") -> dict:
-        """Driving from FACS weights: the self-retargeting cases (same targets, same weights)
-        decoded from z_GE = [w, 0]; MSE and segment-averaged MSE in mm² against the rig."""
+    def suite_animate(self) -> dict:
+        """Driving from FACS weights: the ``self`` cases (same targets, same weights) decoded from
+        z_GE = [w, 0]; MSE and segment-averaged MSE in mm² against the rig."""
         res = {"exact_gt": True, "methods": {}}
-        cases = self.data.cases("self") if suite == "animate" else self.data.cases(suite)
         for m in self.methods:
             errs = []
-            for case in self._bar(cases, f"{suite} [{m.name}]"):
+            for case in self._bar(self.data.cases("self"), f"animate [{m.name}]"):
                 pred = m.animate(case)
                 if pred is None:
                     break
@@ -509,12 +434,12 @@ class Evaluation:
                 res["methods"][m.name] = summarise(errs)
         return res
 
-    def suite_inverse(self, suite: str = "inverse") -> dict:
+    def suite_inverse(self) -> dict:
         """Inverse rigging: rig MSE of the re-evaluated predicted weights, and the weight MAE."""
         res = {"exact_gt": True, "methods": {}}
         for m in self.methods:
             errs, maes = [], []
-            for case in self._bar(self.data.cases(suite), f"{suite} [{m.name}]"):
+            for case in self._bar(self.data.cases("inverse"), f"inverse [{m.name}]"):
                 w = m.invert(case)
                 if w is None:
                     break
@@ -605,20 +530,13 @@ def to_markdown(results: dict) -> str:
         return d
 
     for suite, title in (("self", "Self-retargeting"), ("cross_identity", "Cross-identity"),
-                         ("cross_topology", "Cross-topology"),
-                         ("mh_self", "Realistic heads: self-retargeting"),
-                         ("mh_cross_identity", "Realistic heads: cross-identity"),
-                         ("mh_cross_topology", "Realistic heads: cross-topology"),
-                         ("mh_cross_crop", "Realistic heads: cross-crop")):
+                         ("cross_topology", "Cross-topology")):
         if suite not in s:
             continue
         out.append(f"### {title} (exact GT; MSE in mm², segment-averaged as NFS Table 1)\n")
         groups = []
-        if suite in PAIR_SUITES:
-            pairs = results["config"]
-            for key in PAIR_SUITES[suite]:
-                pairs = pairs[key]
-            groups = list(dict.fromkeys(p["name"] for p in pairs))
+        if suite == "cross_topology":
+            groups = list(dict.fromkeys(p["name"] for p in results["config"]["cross_topology"]))
         header = ["method", "MSE", "segment-avg MSE"] + [f"{g} (MSE / seg)" for g in groups]
         rows = [[m, fmt(get(suite, m, "mse_mm2")), fmt(get(suite, m, "seg_mse_mm2"))]
                 + [f"{fmt(get(suite, m, 'pairs', g, 'mse_mm2'))} / {fmt(get(suite, m, 'pairs', g, 'seg_mse_mm2'))}"
@@ -629,21 +547,16 @@ def to_markdown(results: dict) -> str:
                     for i, name in enumerate(results["segment_names"])]
         out.append(f"<details><summary>{title}: MSE per segment (mm²)</summary>\n\n"
                    + md_table(["segment"] + methods, seg_rows) + "\n\n</details>\n")
-    for inv, heads in (("inverse", ""), ("mh_inverse", "Realistic heads: ")):
-        if inv not in s:
-            continue
-        out.append(f"### {heads}Inverse rigging (exact GT: predicted weights re-applied to the "
-                   f"identity's rig)\n")
-        rows = [[m, fmt(get(inv, m, "mse_mm2")), fmt(get(inv, m, "seg_mse_mm2")),
-                 fmt(get(inv, m, "weight_mae"))] for m in methods]
+    if "inverse" in s:
+        out.append("### Inverse rigging (exact GT: predicted weights re-applied to the identity's rig)\n")
+        rows = [[m, fmt(get("inverse", m, "mse_mm2")), fmt(get("inverse", m, "seg_mse_mm2")),
+                 fmt(get("inverse", m, "weight_mae"))] for m in methods]
         out.append(md_table(["method", "rig MSE", "segment-avg MSE", "weight MAE"], rows) + "\n")
-    for anim, self_suite, heads in (("animate", "self", ""), ("mh_animate", "mh_self", "Realistic heads: ")):
-        if anim not in s:
-            continue
-        out.append(f"### {heads}Driving from FACS weights (animate: the self-retargeting targets and "
-                   f"weights, decoded from z_GE = [w, 0]; exact GT)\n")
-        rows = [[m, fmt(get(anim, m, "mse_mm2")), fmt(get(anim, m, "seg_mse_mm2")),
-                 fmt(get(self_suite, m, "mse_mm2"))] for m in methods if m in s[anim]["methods"]]
+    if "animate" in s:
+        out.append("### Driving from FACS weights (animate: the self-retargeting targets and weights, "
+                   "decoded from z_GE = [w, 0]; exact GT)\n")
+        rows = [[m, fmt(get("animate", m, "mse_mm2")), fmt(get("animate", m, "seg_mse_mm2")),
+                 fmt(get("self", m, "mse_mm2"))] for m in methods if m in s["animate"]["methods"]]
         out.append(md_table(["method", "MSE", "segment-avg MSE", "self-retargeting MSE (same cases)"],
                             rows) + "\n")
     if "jitter" in s:

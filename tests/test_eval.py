@@ -13,7 +13,7 @@ from data_synth.tessellate import tessellate
 from nets.model import NFSConfig, NFSModel
 from retarget.cli import main
 from retarget.errors import RetargetError
-from retarget.evaluate import (SUITES, TRANSFER_SUITES, Evaluation, OracleMethod, RealRig, EvalData, arkit_ict_matrix,
+from retarget.evaluate import (SUITES, Evaluation, OracleMethod, RealRig, EvalData, arkit_ict_matrix,
                                case_errors, ict_to_arkit_weights, load_eval_config,
                                parse_checkpoints, summarise, to_markdown)
 from retarget.metrics import mse_mm2, second_difference_jitter_mm, segment_mse_mm2, weight_mae
@@ -173,13 +173,6 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     assert res["suites"]["self"]["methods"]["full"]["mse_mm2"] > 0
     assert set(res["suites"]["animate"]["methods"]) == {"full", "noskin"}
     assert res["suites"]["animate"]["methods"]["full"]["mse_mm2"] > 0
-    for suite in ("mh_self", "mh_cross_identity", "mh_cross_topology", "mh_cross_crop",
-                  "mh_inverse", "mh_animate"):     # realistic heads have no (u, v): no oracle row
-        assert set(res["suites"][suite]["methods"]) == {"full", "noskin"}, suite
-        assert res["suites"][suite]["methods"]["full"]["mse_mm2"] > 0, suite
-    assert set(res["suites"]["mh_cross_crop"]["methods"]["full"]["pairs"]) == {"bust->face"}
-    md = (out / "eval.md").read_text()
-    assert "Realistic heads: cross-crop" in md and "bust->face" in md
     assert len(res["suites"]["self"]["methods"]["full"]["per_segment_mm2"]) == 20
     real = res["suites"]["real_rig"]["methods"]["full"]
     assert set(real["per_shape"]) == {"jawOpen", "eyeBlinkLeft"}
@@ -190,7 +183,7 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
                   "| oracle (u,v) |"):
         assert title in md
     pngs = sorted(heat.glob("*.png"))
-    assert len(pngs) == len(TRANSFER_SUITES) and all(p.stat().st_size > 100 for p in pngs)
+    assert len(pngs) == 3 and all(p.stat().st_size > 100 for p in pngs)
 
 
 def test_real_rig_self_retargeting_ground_truth_is_exact():
@@ -234,7 +227,8 @@ def test_config_and_checkpoint_errors(tmp_path):
 def test_a_missing_real_rig_leaves_its_suite_out_unless_asked_for(tmp_path, capsys):
     ck = tiny_checkpoint(tmp_path / "m.pt")
     cfg = tmp_path / "norig.yaml"
-    cfg.write_text((TINY.read_text().replace("path: packaged", f"path: {tmp_path / 'absent.npz'}")))
+    cfg.write_text((TINY.read_text().replace("../shared/rigs/makehuman_arkit.npz",
+                                             str(tmp_path / "absent.npz"))))
     assert main(["eval", "--config", str(cfg), "--checkpoint", str(ck), "--no-oracle",
                  "--no-progress", "--out", str(tmp_path / "out")]) == 0
     assert "absent.npz not found, the real_rig suite is left out" in capsys.readouterr().out
