@@ -8,9 +8,18 @@ Identities (``identity``), the 53 shapes carried onto them by deformation transf
 (``tessellate``), regions (``segmentation``), the rig (``rig``). The data files ship in
 ``data/`` with their licence notice (LICENSES.md) and documentation (README.md).
 """
-from .identity import HeadIdentity, head_neutral, sample_head_identity
-from .rig import BaseHeadRig, base_head_rig, build_head_rig
-from .tessellate import CROPS, KINDS, HeadTessellation, head_tessellation
+import importlib
 
-__all__ = ["BaseHeadRig", "CROPS", "HeadIdentity", "HeadTessellation", "KINDS", "base_head_rig",
-           "build_head_rig", "head_neutral", "head_tessellation", "sample_head_identity"]
+# public name -> submodule; loaded on first use, so ``python -m data_synth.makehuman.rig`` runs its
+# module once (no public name equals a submodule's name)
+_EXPORTS = {"HeadIdentity": "identity", "head_neutral": "identity",
+            "sample_head_identity": "identity", "BaseHeadRig": "rig", "base_head_rig": "rig",
+            "build_head_rig": "rig", "CROPS": "tessellate", "KINDS": "tessellate",
+            "HeadTessellation": "tessellate", "head_tessellation": "tessellate"}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'data_synth.makehuman' has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)

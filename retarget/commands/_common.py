@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import RetargetError
 from ..io import READ_FORMATS, WRITE_FORMATS, axis_rotation, check_output, save_mesh
 from ..smoothing import FILTERS
+from ..usd import USD_FORMATS
 
 
 def add_model_args(p) -> None:
@@ -54,6 +55,9 @@ def output_paths(out: str, n_frames: int, inputs: list, fmt: str = "obj") -> lis
             raise RetargetError(f"{out}: {n_frames} frames cannot go into one {ext} file; give a "
                                 f"folder or a .glb")
         paths = [out_path]
+    elif ext in USD_FORMATS:
+        raise RetargetError(f"{out}: cannot write {ext} frames; use .obj, .ply, .glb or a folder (USD "
+                            f"rigs: retarget export-rig / animate)")
     elif ext in READ_FORMATS or ext in (".csv", ".json"):
         raise RetargetError(f"{out}: cannot write {ext}; use .obj, .ply, .glb or a folder")
     elif out_path.exists() and not out_path.is_dir():

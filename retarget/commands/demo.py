@@ -154,8 +154,9 @@ def run(args) -> int:
     mae = float(np.abs(inverted - weights).mean())
     print(f"cross-identity, cross-topology retargeting over {args.frames} frames:")
     print(f"  MSE {mse:.3f} mm², segment-averaged MSE {seg:.3f} mm² (vs the target rig's exact GT)")
+    ratios = f" (ratios {mse / mse0:.2f}, {seg / seg0:.2f})" if min(mse0, seg0) > 0 else ""
     print(f"  doing nothing (target left neutral): MSE {mse0:.3f} mm², segment-averaged "
-          f"{seg0:.3f} mm² (ratios {mse / mse0:.2f}, {seg / seg0:.2f})")
+          f"{seg0:.3f} mm²{ratios}")
     print(f"  inverse rigging of the source: weight MAE {mae:.3f} (predicting 0: "
           f"{float(np.abs(weights).mean()):.3f})")
     print(f"wrote {out}/result/ ({args.frames} OBJ frames), {out}/result.glb, {out}/target_rig.glb "
