@@ -9,7 +9,7 @@ Two frames (the kind is recorded per model: ``nets.model.NFSConfig.canonical``):
   shoulders comes out at a third of the size of the same head cut at the neck.
 - ``"face"``: fitted to the front of the face, so a face mask, a head, a head with eye sockets and
   mouth cavity, and a bust give one frame (see :func:`fit_face_frame`). Its constants are set so
-  that on the mean procedural head it is close to the bounding-box frame (``FACE_BAND_CANONICAL``,
+  that on procedural full heads it is close to the bounding-box frame (``FACE_WIDTH_CANONICAL``,
   ``FACE_POINT_CANONICAL``).
 
 Axes are not changed (the input must already be +y up, +z forward; see
@@ -33,8 +33,8 @@ FRAMES = ("bbox", "face")
 # ---- the face frame (fit_face_frame); lengths relative to the mesh's own size
 HEAD_WINDOW_GAIN = 1.3    # head window depth below the top = gain × the window's x extent
 WINDOW_START = 0.05       # ... grown from this fraction of the mesh's height (past a flat crown)
-GRID_CELLS = 96            # height-field cells along the head window's depth
-SAMPLE_SPACING = 0.5      # triangle samples per height-field cell side: spacing = 0.5 cell
+GRID_CELLS = 96           # height-field cells along the head window's depth
+SAMPLE_SPACING = 0.5      # spacing of the triangle samples, in height-field cells
 FRONT_COS = 0.5           # the face front: surface normals within 60° of +z (cos 60° = 0.5) ...
 JUMP_CELLS = 4.0          # ... and no step in the height field above 4 cells between neighbours
 SEED_RADIUS = 0.1         # components of the face front reaching this fraction of the window
