@@ -1,7 +1,8 @@
 """``retarget eval``: the accuracy suites of DESIGN.md section 6 (``retarget.evaluate``)."""
 from __future__ import annotations
 
-HELP = "accuracy suites (self, cross-identity, cross-topology, inverse, jitter, real rig) as tables"
+HELP = ("accuracy suites (procedural, real rig, realistic heads, canonical frame) as tables, with "
+        "do-nothing and closest-point baseline rows")
 EXAMPLE = """retarget eval --out results/eval
 retarget eval --checkpoint full=runs/full/model.pt no_skinning=runs/noskin/model.pt \\
     --suite cross_identity cross_topology --heatmaps results/heatmaps --out results/eval
