@@ -4,7 +4,7 @@
     r = Retargeter.load()                      # bundled default checkpoint, or a path
     tgt = r.prepare(load_mesh("target.obj"))   # operators, image, identity + skinning codes
     verts = r.transfer(load_mesh("src_frame.obj"), tgt)   # (V_tgt, 3) in target units
-    verts_seq = r.animate(tgt, weights)        # (T, 53) array or {name: value} dicts
+    verts_seq = r.animate(tgt, [{"jawOpen": 1.0}, {"jawOpen": 0.5}])   # or a (T, 53) array
     w = r.invert(load_mesh("frame.obj"))       # (53,) FACS weights in ICT order
 
 Every mesh is canonicalised on the way in (centred, scaled to a 16-unit-wide head) and results are
