@@ -44,7 +44,7 @@ DEFAULTS = {
         "weights": "mixed", "sources_per_target": 4, "decode_faces": 1000,
         "augment": {"rotate_deg": 3.0, "scale": 0.05, "translate": 0.5},
         "val_identities": 4, "val_expressions": 4,
-        "rig": None, "keep_vertices": None, "rig_mix": 0.5,
+        "rig": None, "keep_vertices": None, "rig_mix": 0.5, "rig_strict": False,
     },
     "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,
              "bp": 1.0, "br": 1.0, "nll": 1.0, "free_dims_dropout": 0.0},

@@ -102,8 +102,8 @@ def test_an_export_named_like_its_module_stays_the_export():
     import sys
     import types
 
-    importlib_module = sys.modules["data_synth.tessellate"]          # imported at the top
+    module = sys.modules["data_synth.tessellate"]          # imported at the top
     assert isinstance(data_synth.tessellate, types.FunctionType)
-    assert data_synth.tessellate is importlib_module.tessellate
-    assert data_synth.Tessellation is importlib_module.Tessellation
+    assert data_synth.tessellate is module.tessellate
+    assert data_synth.Tessellation is module.Tessellation
     assert isinstance(data_synth.head, types.ModuleType)             # other submodules as usual
