@@ -4,13 +4,18 @@
     r = Retargeter.load()                      # bundled default checkpoint, or a path
     tgt = r.prepare(load_mesh("target.obj"))   # operators, image, identity + skinning codes
     verts = r.transfer(load_mesh("src_frame.obj"), tgt)   # (V_tgt, 3) in target units
-    verts_seq = r.animate(tgt, weights)        # (T, 53) array or {name: value} dicts
+    verts_seq = r.animate(tgt, [{"jawOpen": 1.0}, {"jawOpen": 0.5}])   # or a (T, 53) array
     w = r.invert(load_mesh("frame.obj"))       # (53,) FACS weights in ICT order
 
 Every mesh is canonicalised on the way in (centred, scaled to a 16-unit-wide head) and results are
 mapped back to the target's own frame and units. Meshes above ``proxy_vertices`` (targets and source
 frames) are encoded on a vertex-clustered proxy; targets are decoded per vertex at full resolution,
 in chunks of ``chunk`` vertices.
+
+Every call that takes a mesh takes a ``retarget.mesh.Mesh``, a ``trimesh.Trimesh`` or a
+``(vertices (V,3), faces (F,3))`` pair, vertex order kept (``retarget.mesh.as_mesh``). What a source
+topology needs (its operators) is computed once and reused by later calls (``Retargeter.encode``), so
+frames streamed one call at a time run at the batched speed.
 
 Every target and source is checked to be plausibly a head or face (:func:`check_head_like`), since
 the units are the user's own only proportions can be judged: at least ``MIN_VERTICES`` vertices, and
@@ -19,6 +24,8 @@ refused; the procedural face-only crop measures 0.66, the full head with neck 0.
 """
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -27,13 +34,14 @@ import numpy as np
 import torch
 
 from data_synth.facs import FACS_INDEX, N_FACS
+from nets.geometry import Operators, TorchOperators, load_or_compute_operators
 from nets.model import NFSModel, TargetCodes, weights_to_code
 
 from .canonical import Canonicaliser
 from .checkpoint import load_checkpoint, model_from_checkpoint
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
-from .mesh import Mesh
+from .mesh import Mesh, as_mesh, is_mesh_like
 from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh, vertex_features
 from .smoothing import smooth_codes
 
@@ -45,7 +53,9 @@ MIN_ASPECT = 0.1    # shortest / longest bounding-box side of a plausible head o
 def check_head_like(mesh: Mesh, role: str = "mesh") -> None:
     """RetargetError naming the mesh if it cannot be a face: fewer than MIN_VERTICES vertices, or a
     bounding box whose shortest side is below MIN_ASPECT times its longest (scale-free, so metres,
-    centimetres and millimetres are all accepted). ``role``: "target" or "source", for the message."""
+    centimetres and millimetres are all accepted). ``role``: "target" or "source", for the message.
+    ``mesh``: anything :func:`retarget.mesh.as_mesh` takes."""
+    mesh = as_mesh(mesh, role=role)
     name = mesh.name or role
     if mesh.n_vertices < MIN_VERTICES:
         raise RetargetError(f"{name}: only {mesh.n_vertices} vertices; a {role} face mesh needs at "
@@ -98,17 +108,52 @@ class BakedRig:
         return self.neutral + np.tensordot(np.asarray(weights, np.float32), self.deltas, axes=1)
 
 
+@dataclass
+class SourceTopology:
+    """What every frame of one source topology shares, kept across calls (``Retargeter.encode``).
+
+    faces: (F',3) int64 faces of the encoded mesh (the proxy's for sources above ``proxy_vertices``).
+    cluster: (V,) int64 proxy vertex of each source vertex, or None (the mesh itself is encoded).
+    canon: the canonicaliser of the reference mesh (the source neutral, or the first frame seen).
+    ops: the operators of the reference's canonical mesh; ops_t: the same on the device.
+    """
+
+    faces: np.ndarray
+    cluster: np.ndarray | None
+    canon: Canonicaliser
+    ops: Operators
+    ops_t: TorchOperators
+
+    def proxy(self, mesh: Mesh) -> Mesh:
+        """The mesh the encoder sees for a frame of this topology: the frame, or its proxy (each
+        proxy vertex the mean of its cluster)."""
+        if self.cluster is None:
+            return mesh
+        return Mesh(cluster_means(mesh.vertices, self.cluster), self.faces, mesh.name)
+
+
+def _digest(array: np.ndarray) -> str:
+    return hashlib.blake2b(np.ascontiguousarray(array).tobytes(), digest_size=16).hexdigest()
+
+
 class Retargeter:
-    """Expression cloning, driving from FACS weights and inverse rigging with one NFS model."""
+    """Expression cloning, driving from FACS weights and inverse rigging with one NFS model.
+
+    proxy_vertices: meshes above this are encoded on a vertex-clustered proxy. chunk: vertices
+    decoded at once. cache_dir: the on-disk operator cache (``nets.geometry``). source_cache_size:
+    source topologies whose operators are kept in memory across calls (``encode``; 0 = none).
+    """
 
     def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
-                 chunk: int = 16384, cache_dir=None):
+                 chunk: int = 16384, cache_dir=None, source_cache_size: int = 8):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
         self.proxy_vertices = proxy_vertices
         self.chunk = chunk
         self.cache_dir = cache_dir
+        self.source_cache_size = int(source_cache_size)
+        self._sources: OrderedDict[tuple, SourceTopology] = OrderedDict()
 
     @classmethod
     def load(cls, path=None, device=None, **kwargs) -> "Retargeter":
@@ -129,10 +174,12 @@ class Retargeter:
                             cache_dir=self.cache_dir, canonical=self.cfg.canonical)
 
     @torch.no_grad()
-    def prepare(self, mesh: Mesh) -> Target:
-        """Operators, frontal image, z_ID and skinning weights of a target neutral mesh."""
+    def prepare(self, mesh) -> Target:
+        """Operators, frontal image, z_ID and skinning weights of a target neutral mesh: a Mesh, a
+        ``trimesh.Trimesh`` or a ``(vertices, faces)`` pair (a Target is returned as it is)."""
         if isinstance(mesh, Target):
             return mesh
+        mesh = as_mesh(mesh, role="target")
         check_head_like(mesh, "target")
         canon = Canonicaliser.fit(mesh.vertices, name=mesh.name or "target",
                                   kind=self.cfg.canonical, faces=mesh.faces)
@@ -152,39 +199,76 @@ class Retargeter:
         return Target(mesh, proxy, torch.from_numpy(feat).to(self.device), c, codes)
 
     # --------------------------------------------------------------------------- codes
-    @torch.no_grad()
-    def encode(self, frames, source_neutral: Mesh | None = None, progress: bool = False) -> np.ndarray:
-        """Global expression codes z_GE of source frame(s): a Mesh or a list of frames sharing a
-        topology -> (128,) or (T,128). The frames share one canonical frame and one set of operators,
-        those of ``source_neutral`` if given, else of the first frame. Sources above
-        ``proxy_vertices`` are encoded on the vertex-clustered proxy of that reference (each frame's
-        proxy vertex = the mean of its cluster). ``progress``: a tqdm bar."""
-        from tqdm import tqdm
+    def source_topology(self, ref: Mesh, neutral: bool = False) -> SourceTopology:
+        """The structure shared by the frames of ``ref``'s topology: from the in-memory cache, or
+        computed on ``ref`` (proxy clustering above ``proxy_vertices``, canonicaliser, operators) and
+        cached.
 
-        single = isinstance(frames, Mesh)
-        frames = [frames] if single else list(frames)
-        if not frames:
-            raise RetargetError("no source frames given")
-        ref = source_neutral or frames[0]
-        check_head_like(ref, "source")
+        The key is the vertex count and a hash of the face array, plus a hash of the vertices when
+        ``ref`` is a source neutral (``neutral``), so each neutral keeps its own entry while frames
+        without one share the entry of the first frame of their topology. The cache is an LRU of
+        ``source_cache_size`` entries (0 = no cache: computed on every call);
+        :meth:`clear_source_cache` empties it.
+        """
+        key = (ref.n_vertices, _digest(ref.faces)) + ((_digest(ref.vertices),) if neutral else ())
+        if key in self._sources:
+            self._sources.move_to_end(key)
+            return self._sources[key]
         faces, cluster = ref.faces, None
         if ref.n_vertices > self.proxy_vertices:
             (_, faces), cluster = cluster_decimate(ref.vertices, ref.faces, self.proxy_vertices)
+        pv = ref.vertices if cluster is None else cluster_means(ref.vertices, cluster)
+        canon = Canonicaliser.fit(pv, name=ref.name or "source")
+        ops = load_or_compute_operators(canon.to_canonical(pv).astype(np.float32), faces,
+                                        self.cfg.k_eig, cache_dir=self.cache_dir)
+        src = SourceTopology(faces, cluster, canon, ops, ops.to_torch(self.device))
+        if self.source_cache_size > 0:
+            self._sources[key] = src
+            while len(self._sources) > self.source_cache_size:
+                self._sources.popitem(last=False)
+        return src
 
-        def proxy(mesh: Mesh) -> Mesh:
-            return mesh if cluster is None else Mesh(cluster_means(mesh.vertices, cluster), faces, mesh.name)
+    def clear_source_cache(self) -> None:
+        """Forget the source topologies kept by :meth:`source_topology` (e.g. before streaming
+        another performer of the same topology without a ``source_neutral``)."""
+        self._sources.clear()
 
-        base = self._prepare(proxy(ref))
-        ops_t = base.torch_ops(self.device)   # the frames share these: converted once, not per frame
+    @torch.no_grad()
+    def encode(self, frames, source_neutral=None, progress: bool = False) -> np.ndarray:
+        """Global expression codes z_GE of source frame(s): a mesh (a Mesh, a ``trimesh.Trimesh`` or
+        a ``(vertices, faces)`` pair) or a list of frames sharing a topology -> (128,) or (T,128).
+
+        The frames of a call share one canonical frame, that of ``source_neutral`` if given, else of
+        the first frame. They share one set of operators (and, above ``proxy_vertices``, one
+        vertex-clustered proxy: each frame's proxy vertex = the mean of its cluster), those of the
+        source's topology: computed on ``source_neutral`` if given, else on the first frame of that
+        topology this Retargeter saw, and kept for later calls (:meth:`source_topology`; bounded by
+        ``source_cache_size``, emptied by :meth:`clear_source_cache`). So a stream of single-frame
+        calls costs what one batched call does per frame. To switch to another performer of the same
+        topology, pass their ``source_neutral`` or clear the cache. ``progress``: a tqdm bar."""
+        from tqdm import tqdm
+
+        single = is_mesh_like(frames)
+        frames = [frames] if single else list(frames)
+        if not frames:
+            raise RetargetError("no source frames given")
+        frames = [as_mesh(f, role="source" if single else f"source frame {i}")
+                  for i, f in enumerate(frames)]
+        neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
+        ref = neutral or frames[0]
+        check_head_like(ref, "source")
+        src = self.source_topology(ref, neutral=neutral is not None)
+        canon = src.canon if neutral is not None else Canonicaliser.fit(
+            src.proxy(ref).vertices, name=ref.name or "source")
         codes = []
         for f in tqdm(frames, desc="encoding", unit="frame", disable=not progress or len(frames) < 2):
             if f.n_vertices != ref.n_vertices:
                 raise RetargetError(f"{f.name or 'frame'}: {f.n_vertices} vertices, but the source has "
                                     f"{ref.n_vertices} ({ref.name or 'first frame'})")
-            p = self._prepare(proxy(f), canon=base.canon, ops=base.ops)
+            p = self._prepare(src.proxy(f), canon=canon, ops=src.ops)
             feat = torch.from_numpy(p.feat).to(self.device)
             img = torch.from_numpy(p.image)[None].to(self.device)
-            codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], ops_t))
+            codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], src.ops_t))
         out = torch.stack(codes).cpu().numpy()
         return out[0] if single else out
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RetargetError
-from .mesh import Mesh, check_mesh
+from .mesh import Mesh, as_mesh, check_mesh, is_mesh_like
 
 READ_FORMATS = (".obj", ".ply", ".off", ".glb", ".gltf")
 WRITE_FORMATS = (".obj", ".ply")
@@ -90,8 +90,9 @@ def check_output(out_path, input_paths) -> None:
 def save_mesh(path, mesh_or_vertices, faces=None) -> None:
     """Write a mesh as OBJ (text, vertices with 9 decimals) or PLY (binary, float32), atomically.
 
-    mesh_or_vertices: a Mesh, or (V,3) vertices with ``faces`` (F,3). Vertex order is kept.
-    RetargetError for an unknown extension or an unwritable destination.
+    mesh_or_vertices: a mesh (anything :func:`retarget.mesh.as_mesh` takes: a Mesh, a
+    trimesh.Trimesh, a (vertices, faces) pair), or (V,3) vertices with ``faces`` (F,3). Vertex order
+    is kept. RetargetError for an unknown extension or an unwritable destination.
     """
     import trimesh
 
@@ -99,8 +100,9 @@ def save_mesh(path, mesh_or_vertices, faces=None) -> None:
     if path.suffix.lower() not in WRITE_FORMATS:
         raise RetargetError(f"{path}: cannot write {path.suffix or 'files without extension'}; "
                             f"use {', '.join(WRITE_FORMATS)}")
-    if isinstance(mesh_or_vertices, Mesh):
-        verts, faces = mesh_or_vertices.vertices, mesh_or_vertices.faces
+    if faces is None and is_mesh_like(mesh_or_vertices):
+        mesh = as_mesh(mesh_or_vertices, role=str(path))
+        verts, faces = mesh.vertices, mesh.faces
     else:
         verts = np.asarray(mesh_or_vertices, dtype=np.float64)
         faces = np.zeros((0, 3), np.int64) if faces is None else np.asarray(faces, dtype=np.int64)

@@ -4,9 +4,13 @@ A :class:`Mesh` is a pair of arrays in the project frame (centimetres or the use
 +z forward, +x = the character's left) plus a name (usually the file it came from). Treat the arrays
 as immutable: derived quantities (vertex normals) are computed lazily and cached, trimesh style; use
 :meth:`Mesh.copy` or build a new Mesh to change geometry.
+
+:func:`as_mesh` is the one conversion of what users hold (a Mesh, a ``trimesh.Trimesh``, a
+``(vertices, faces)`` pair) into a Mesh; every API call that takes a mesh goes through it.
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -62,6 +66,74 @@ class Mesh:
     def copy(self) -> "Mesh":
         """A deep copy (fresh arrays, no cached normals)."""
         return Mesh(self.vertices.copy(), self.faces.copy(), self.name)
+
+
+MESH_TYPES = "a retarget Mesh, a trimesh.Trimesh or a (vertices (V,3), faces (F,3)) pair"
+
+
+def _is_trimesh(obj) -> bool:
+    """Whether ``obj`` is a trimesh.Trimesh (without importing trimesh: a Trimesh implies it is)."""
+    trimesh = sys.modules.get("trimesh")
+    return trimesh is not None and isinstance(obj, trimesh.Trimesh)
+
+
+def _pair(obj):
+    """(vertices, faces) arrays if ``obj`` is a 2-item tuple/list of 2-D numeric arrays, else None."""
+    if not isinstance(obj, (tuple, list)) or len(obj) != 2 or any(is_mesh_like(x) for x in obj):
+        return None
+    try:
+        v, f = np.asarray(obj[0]), np.asarray(obj[1])
+    except (ValueError, TypeError):  # ragged or not numbers
+        return None
+    if v.ndim != 2 or f.ndim != 2 or v.dtype.kind not in "iuf" or f.dtype.kind not in "iuf":
+        return None
+    return v, f
+
+
+def is_mesh_like(obj) -> bool:
+    """Whether :func:`as_mesh` takes ``obj`` as one mesh (not as a sequence of frames)."""
+    return isinstance(obj, Mesh) or _is_trimesh(obj) or _pair(obj) is not None
+
+
+def as_mesh(obj, name: str = "", role: str = "mesh") -> Mesh:
+    """The pipeline's Mesh from what a user holds; every API call that takes a mesh uses this.
+
+    - a :class:`Mesh`: returned as it is (not re-validated);
+    - a ``trimesh.Trimesh``: its ``vertices`` and ``faces`` exactly as stored, vertex order kept
+      (``process=False`` semantics: nothing merged or removed here; load files with
+      ``trimesh.load_mesh(path, process=False, maintain_order=True)`` so that trimesh keeps the
+      file's order too); named after its file (``metadata``) unless ``name`` is given;
+    - a ``(vertices (V,3), faces (F,3))`` pair of arrays (or nested lists), faces integer-valued.
+
+    Converted meshes are validated (:func:`check_mesh`). RetargetError naming ``role`` (e.g.
+    "target", "source frame 3") for anything else: a trimesh.Scene or PointCloud, float faces,
+    wrong shapes, another type.
+    """
+    if isinstance(obj, Mesh):
+        return obj
+    pair = None if _is_trimesh(obj) else _pair(obj)
+    if _is_trimesh(obj):
+        meta = getattr(obj, "metadata", None) or {}
+        name = name or str(meta.get("file_path") or meta.get("file_name") or meta.get("name") or "")
+        v, f = np.asarray(obj.vertices), np.asarray(obj.faces)
+    elif pair is not None:
+        v, f = pair
+        if f.dtype.kind == "f":
+            if not (np.isfinite(f).all() and (f == np.round(f)).all()):
+                raise RetargetError(f"{name or role}: faces of a (vertices, faces) pair must be "
+                                    f"integer vertex indices, got {f.dtype} values")
+            f = f.astype(np.int64)
+    else:
+        module = type(obj).__module__.split(".")[0]
+        kind = type(obj).__name__ if module == "builtins" else f"{module}.{type(obj).__name__}"
+        hint = {"trimesh.Scene": " (trimesh.load_mesh(path, process=False, maintain_order=True) "
+                                 "gives one Trimesh)",
+                "trimesh.PointCloud": " (a point cloud has no faces)",
+                "numpy.ndarray": " (vertices alone: pass (vertices, faces))"}.get(kind, "")
+        raise RetargetError(f"{name or role}: expected {MESH_TYPES}, got {kind}{hint}")
+    mesh = Mesh(v, f, name or role)  # its shape errors name the role
+    mesh.name = name
+    return check_mesh(mesh, name or role)
 
 
 def check_mesh(mesh: Mesh, path=None) -> Mesh:

@@ -131,8 +131,15 @@ class Renderer:
         sequence); False takes verts as normalised device coordinates already.
         Returns (H,W,3) float32, or (H,W,1) for depth; background 0.
         """
-        if mode not in MODES:
-            raise ValueError(f"unknown render mode {mode!r}; choose from {MODES}")
+        return self.render_modes(verts, faces, (mode,), vertex_colors, view, fit)[0]
+
+    def render_modes(self, verts, faces, modes, vertex_colors=None, view: str = "front",
+                     fit=True) -> list[np.ndarray]:
+        """``[render(verts, faces, mode=m, ...) for m in modes]``, the mesh prepared and uploaded
+        once (the CNN input renders two modes of every frame)."""
+        for mode in modes:
+            if mode not in MODES:
+                raise ValueError(f"unknown render mode {mode!r}; choose from {MODES}")
         v = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
         f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         rot = view_rotation(view)
@@ -149,7 +156,7 @@ class Renderer:
             cam = (cam - centre) * scale
         else:
             cam = cam * np.array([1.0, 1.0, -1.0])
-        if mode == "colors":
+        if "colors" in modes:
             if vertex_colors is None:
                 raise ValueError('mode "colors" needs vertex_colors (V,3)')
             colors = np.asarray(vertex_colors, dtype=np.float32).reshape(len(v), 3)
@@ -162,21 +169,24 @@ class Renderer:
         ibo = ctx.buffer(f.astype("i4").tobytes())
         vao = ctx.vertex_array(self._program, [(vbo, "3f 3f 3f", "in_pos", "in_normal", "in_color")],
                                index_buffer=ibo, index_element_size=4)
+        images = []
         try:
             self._fbo.use()
             ctx.enable(ctx.DEPTH_TEST)
             ctx.disable(ctx.CULL_FACE)
-            ctx.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self._program["mode"].value = MODES.index(mode)
-            vao.render()
-            raw = self._fbo.read(components=4, dtype="f4")
+            for mode in modes:
+                ctx.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                self._program["mode"].value = MODES.index(mode)
+                vao.render()
+                raw = self._fbo.read(components=4, dtype="f4")
+                img = np.frombuffer(raw, dtype=np.float32).reshape(self.size, self.size, 4)[::-1]
+                img = np.clip(img[..., :1] if mode == "depth" else img[..., :3], 0.0, 1.0)
+                images.append(np.ascontiguousarray(img))
         finally:
             vao.release()
             vbo.release()
             ibo.release()
-        img = np.frombuffer(raw, dtype=np.float32).reshape(self.size, self.size, 4)[::-1]
-        img = np.clip(img[..., :1] if mode == "depth" else img[..., :3], 0.0, 1.0)
-        return np.ascontiguousarray(img)
+        return images
 
 
 _RENDERERS: dict = {}
@@ -199,11 +209,8 @@ def render_frontal(verts, faces, size: int = 256, channels=("shaded", "depth"),
     (3), stacked in the given order. Returns (C,H,W) float32 in [0,1]; with ``fit=True`` invariant
     to the mesh's scale and translation.
     """
-    r = _renderer(size)
-    planes = []
-    for ch in channels:
-        img = r.render(verts, faces, mode=ch, fit=fit)
-        planes.append(img[..., :1] if ch == "shaded" else img)
+    images = _renderer(size).render_modes(verts, faces, tuple(channels), fit=fit)
+    planes = [img[..., :1] if ch == "shaded" else img for ch, img in zip(channels, images)]
     return np.ascontiguousarray(np.concatenate(planes, axis=-1).transpose(2, 0, 1))
 
 

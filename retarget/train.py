@@ -44,7 +44,7 @@ DEFAULTS = {
         "weights": "mixed", "sources_per_target": 4, "decode_faces": 1000,
         "augment": {"rotate_deg": 3.0, "scale": 0.05, "translate": 0.5},
         "val_identities": 4, "val_expressions": 4,
-        "rig": None, "keep_vertices": None, "rig_mix": 0.5,
+        "rig": None, "keep_vertices": None, "rig_mix": 0.5, "rig_strict": False,
         # shares of the two rig sources among the pool's identities (training_data.TargetPool)
         "sources": {"procedural": 1.0, "makehuman": 0.0},
         "makehuman": {

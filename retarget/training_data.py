@@ -269,7 +269,8 @@ class RigPool:
         self.mix = float(data_cfg["rig_mix"])
         if not 0.0 <= self.mix <= 1.0:
             raise RetargetError(f"data.rig_mix must be in [0, 1], got {self.mix}")
-        rig = load_user_rig(data_cfg["rig"], data_cfg["keep_vertices"])
+        rig = load_user_rig(data_cfg["rig"], data_cfg["keep_vertices"],
+                            strict=bool(data_cfg.get("rig_strict", False)))
         if rig.segments is not None and rig.segments.max() >= model_cfg.n_segments:
             raise RetargetError(f"{rig.name}: segment labels reach {int(rig.segments.max())}, but the "
                                 f"model has {model_cfg.n_segments} segments")

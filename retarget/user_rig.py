@@ -10,7 +10,9 @@ Three layouts are read, all mapped to the 53 ICT slots (ICT-FaceKit order, ``FAC
 - ICT-FaceKit's ``FaceXModel`` folder as published: the same with the neutral named
   ``generic_neutral_mesh.obj`` (quads are triangulated, vertex order kept).
 
-Shape names are ICT names or ARKit names, matched case-insensitively. ARKit ``tongueOut`` has no ICT
+Shape names are ICT names or ARKit names, matched case-insensitively. Other shapes (a rig's
+correctives, visemes, ICT-FaceKit's ``PupilDilate_L/R`` and ``cheekRaiser_L/R``) are left out and
+reported in one :class:`UnknownShapeWarning` (``strict=True``: refused). ARKit ``tongueOut`` has no ICT
 slot and is dropped. ARKit ``browInnerUp`` and ``cheekPuff`` each feed two ICT slots; they are
 split *spatially*: the ``_L`` half keeps the motion on the character's left (+x) of the neutral's
 mid-plane, the ``_R`` half the rest, with a smooth cross-over ``MIDLINE_BAND`` of the head width
@@ -23,6 +25,7 @@ coefficients in the procedural identity space, so fine-tuning skips L_ID on it.
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +42,11 @@ MIDLINE_BAND = 0.05
 NEUTRAL_FILES = ("neutral", "generic_neutral_mesh")
 SHAPE_SUFFIXES = (".obj", ".ply", ".off")
 _IDENTITY_FILE = re.compile(r"identity\d+$", re.IGNORECASE)
+LISTED_NAMES = 12  # names spelled out in one message; the rest are counted
+
+
+class UnknownShapeWarning(UserWarning):
+    """Shapes of a rig with neither an ICT nor an ARKit name, left out (:func:`known_names`)."""
 
 
 @dataclass
@@ -72,19 +80,21 @@ class UserRig:
         return self.neutral + np.tensordot(w, self.deltas, axes=(-1, 0))
 
 
-def load_user_rig(path, keep_vertices=None) -> UserRig:
+def load_user_rig(path, keep_vertices=None, strict: bool = False) -> UserRig:
     """Read a rig in any of the three layouts (module docstring).
 
     keep_vertices: "A:B" keeps vertices A..B-1 (Python slice; either end may be left out), e.g. the
     skin of a model that also has eyeballs and teeth; faces are restricted to the range and
-    re-indexed. RetargetError names the file and the problem (unknown shape names, listed; vertex
-    counts that differ; a bad range).
+    re-indexed. strict: refuse shapes with neither an ICT nor an ARKit name instead of leaving them
+    out with one :class:`UnknownShapeWarning`. RetargetError names the file and the problem
+    (unknown shape names under ``strict``, listed; no known shape at all; vertex counts that
+    differ; a bad range).
     """
     path = Path(path)
     if path.is_dir():
-        neutral, faces, named, identity, segments = _read_folder(path)
+        neutral, faces, named, identity, segments = _read_folder(path, strict)
     elif path.is_file():
-        neutral, faces, named, identity, segments = _read_npz(path)
+        neutral, faces, named, identity, segments = _read_npz(path, strict)
     else:
         raise RetargetError(f"{path}: no such rig (expected an .npz or a folder of OBJs)")
     deltas, present = ict_deltas(named, neutral, path)
@@ -93,7 +103,7 @@ def load_user_rig(path, keep_vertices=None) -> UserRig:
     return rig if keep_vertices is None else keep_range(rig, keep_vertices)
 
 
-def _read_npz(path: Path):
+def _read_npz(path: Path, strict: bool):
     """(neutral (V,3), faces (F,3), {name: delta (V,3)}, identity_deltas or None, segments or None)."""
     try:
         with np.load(path, allow_pickle=False) as d:
@@ -131,11 +141,12 @@ def _read_npz(path: Path):
             raise RetargetError(f"{path}: segments {segments.shape} must be (V,) or (V, L) with "
                                 f"V = {len(neutral)}")
         segments = (segments.argmax(1) if segments.ndim == 2 else segments).astype(np.int64)
-    return (neutral, faces, dict(zip(names, deltas)),
+    kept = set(known_names(names, path, strict))
+    return (neutral, faces, {n: d for n, d in zip(names, deltas) if n in kept},
             None if identity is None else identity.astype(np.float32), segments)
 
 
-def _read_folder(path: Path):
+def _read_folder(path: Path, strict: bool):
     """The folder layouts: (neutral, faces, {name: delta}, identity_deltas or None, None)."""
     files = sorted(f for f in path.iterdir() if f.suffix.lower() in SHAPE_SUFFIXES)
     neutral_files = [f for f in files if f.stem in NEUTRAL_FILES]
@@ -155,23 +166,52 @@ def _read_folder(path: Path):
     shapes = [f for f in files if f not in neutral_files]
     identity_files = [f for f in shapes if _IDENTITY_FILE.match(f.stem)]
     named = {f.stem: f for f in shapes if f not in identity_files}
-    ict_slots(named, path)  # name errors before the (slow) reading of every shape
+    named = {n: named[n] for n in known_names(named, path, strict)}  # before reading the shapes
+    ict_slots(named, path)  # two shapes for one slot: refused before reading every shape
     identity = np.stack([delta(f) for f in identity_files]) if identity_files else None
     return neutral.vertices, neutral.faces, {n: delta(f) for n, f in named.items()}, identity, None
+
+
+def _slot_lookup() -> dict[str, tuple[int, ...]]:
+    """{lower-case ICT or ARKit name: ICT slot indices} (``tongueout`` -> ())."""
+    lookup = {n.lower(): (FACS_INDEX[n],) for n in FACS_INDEX}
+    for n in ARKIT_NAMES:
+        lookup.setdefault(n.lower(), tuple(FACS_INDEX[i] for i in arkit_to_ict(n)))
+    return lookup
+
+
+def _listed(names) -> str:
+    """Names for one message line: the first ``LISTED_NAMES``, then how many more."""
+    names = list(names)
+    more = len(names) - LISTED_NAMES
+    return ", ".join(names[:LISTED_NAMES]) + (f" and {more} more" if more > 0 else "")
+
+
+def known_names(names, where, strict: bool = False) -> list[str]:
+    """The names (in their order) that are ICT or ARKit names (case-insensitive).
+
+    The others are left out with one :class:`UnknownShapeWarning` naming ``where`` and them, or,
+    with ``strict``, refused (RetargetError). RetargetError too if no name is known."""
+    lookup = _slot_lookup()
+    names = list(names)
+    known = [n for n in names if n.lower() in lookup]
+    unknown = sorted(n for n in names if n.lower() not in lookup)
+    if unknown and (strict or not known):
+        raise RetargetError(f"{where}: unknown blendshape names {_listed(unknown)} (expected ICT "
+                            f"names such as browDown_L or ARKit names such as browDownLeft)")
+    if unknown:
+        warnings.warn(f"{where}: left out {len(unknown)} shapes that have no ICT or ARKit name: "
+                      f"{_listed(unknown)}", UnknownShapeWarning, stacklevel=2)
+    return known
 
 
 def ict_slots(names, where) -> dict[str, tuple[int, ...]]:
     """{name: ICT slot indices} for ICT or ARKit names (case-insensitive; ``tongueOut`` -> ()).
 
-    RetargetError (naming ``where``) listing every unknown name, or naming two shapes that fill
-    the same slot."""
-    lookup = {n.lower(): (FACS_INDEX[n],) for n in FACS_INDEX}
-    for n in ARKIT_NAMES:
-        lookup.setdefault(n.lower(), tuple(FACS_INDEX[i] for i in arkit_to_ict(n)))
-    unknown = sorted(n for n in names if n.lower() not in lookup)
-    if unknown:
-        raise RetargetError(f"{where}: unknown blendshape names {', '.join(unknown)} (expected ICT "
-                            f"names such as browDown_L or ARKit names such as browDownLeft)")
+    RetargetError (naming ``where``) listing every unknown name (:func:`known_names` leaves them
+    out first), or naming two shapes that fill the same slot."""
+    lookup = _slot_lookup()
+    known_names(names, where, strict=True)
     slots = {n: lookup[n.lower()] for n in names}
     owner: dict[int, str] = {}
     for n, idx in slots.items():

@@ -26,16 +26,17 @@ def test_procedural_heads_reach_the_requested_size():
 
 
 def test_target_checks():
-    frames = {"n_vertices": 11_200, "model": {"transfer": {"throughput_fps": 6.0},
+    frames = {"n_vertices": 11_200, "model": {"transfer": {"throughput_fps": 6.0, "latency_ms": 250.0},
                                               "animate": {"throughput_fps": 4.0},
                                               "baked": {"throughput_fps": 900.0},
-                                              "invert": {"throughput_fps": 12.0}}}
+                                              "invert": {"throughput_fps": 12.0, "latency_ms": 80.0}}}
     results = {"prepare": {"cpu": [{"n_vertices": 1_001_000, "seconds": 100.0, "peak_rss_mb": 9000.0},
                                    {"n_vertices": 98_000, "seconds": 16.0, "peak_rss_mb": 900.0}]},
                "frames": {"cpu": frames, "cuda": {**frames, "n_vertices": 2000}}}
     met = {t["target"]: t["met"] for t in check_targets(results)}
     assert met == {"prepare_100k_s": False, "prepare_1M_s": True, "prepare_1M_peak_gb": False,
-                   "transfer_fps": True, "animate_fps": False, "baked_fps": True, "invert_fps": True}
+                   "transfer_fps": True, "animate_fps": False, "baked_fps": True, "invert_fps": True,
+                   "transfer_call_fps": False, "invert_call_fps": True}   # 4 and 12.5 per call
     assert all(t["device"] == "cpu" for t in check_targets(results))   # 2k frames: no target
 
 
@@ -73,6 +74,7 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
     assert len(without) == 3 and all(v > 0 for v in without.values())
     md = (out / "bench.md").read_text()
     assert "Target preparation" in md and "linear blendshapes (floor)" in md and "samples/s" in md
+    assert "| per call frames/s | batched frames/s |" in md
     assert "measured by undoing it" in md and "| target encoded once for S sources |" in md
     assert to_markdown(res) in md
 

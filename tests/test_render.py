@@ -122,6 +122,15 @@ def test_render_frontal_channels(blob):
     assert np.abs(y[4] - x[0]).mean() < 2e-3 and np.abs(y[3] - x[1]).mean() < 2e-3
 
 
+def test_render_modes_equals_one_render_per_mode(renderer, blob):
+    v, f = blob
+    modes = ("shaded", "depth", "normals", "shaded")
+    for img, mode in zip(renderer.render_modes(v, f, modes, view="three_quarter"), modes):
+        np.testing.assert_array_equal(img, renderer.render(v, f, mode=mode, view="three_quarter"))
+    x = render_frontal(v, f, 48, channels=("shaded", "depth"))
+    np.testing.assert_array_equal(x[1], render_frontal(v, f, 48, channels=("depth",))[0])
+
+
 def test_unknown_mode_and_missing_colors(renderer, blob):
     v, f = blob
     with pytest.raises(ValueError):

@@ -16,7 +16,7 @@ from retarget.io import save_mesh
 from retarget.mesh import Mesh
 from retarget.train import Trainer, group_losses, load_config
 from retarget.training_data import RigPool
-from retarget.user_rig import keep_range, load_user_rig, side_weights
+from retarget.user_rig import UnknownShapeWarning, keep_range, load_user_rig, side_weights
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ROOT / "configs" / "train" / "tiny.yaml"
@@ -111,14 +111,25 @@ def test_facexmodel_folder_with_quads_and_identity_shapes(tmp_path):
 
 
 # ------------------------------------------------------------------------------------- errors
-def test_unknown_names_duplicates_and_vertex_counts_are_refused(tmp_path, proc_rig):
+def test_unknown_names_are_left_out_or_refused_duplicates_and_vertex_counts_refused(tmp_path, proc_rig):
     d = proc_rig.deltas[0]
     folder = write_folder(tmp_path / "bad", "neutral", proc_rig.neutral, proc_rig.faces,
                           {"jawOpen": d, "smileBig": d, "frown": d})
+    with pytest.warns(UnknownShapeWarning, match=r"bad: left out 2 shapes that have no ICT or "
+                                                 r"ARKit name: frown, smileBig$") as caught:
+        rig = load_user_rig(folder)
+    assert len(caught) == 1 and [FACS_NAMES[i] for i in np.flatnonzero(rig.present)] == ["jawOpen"]
     with pytest.raises(RetargetError, match=r"bad: unknown blendshape names frown, smileBig"):
-        load_user_rig(folder)
+        load_user_rig(folder, strict=True)
+    npz = _renamed_npz(tmp_path / "bad.npz", proc_rig, ["jawOpen", "notAShape"])
+    with pytest.warns(UnknownShapeWarning, match=r"bad.npz: left out 1 shapes .*: notAShape"):
+        load_user_rig(npz)
     with pytest.raises(RetargetError, match=r"unknown blendshape names notAShape"):
-        load_user_rig(_renamed_npz(tmp_path / "bad.npz", proc_rig, ["jawOpen", "notAShape"]))
+        load_user_rig(npz, strict=True)
+    only_unknown = _renamed_npz(tmp_path / "none.npz", proc_rig, [f"corrective{i:02d}" for i in range(20)])
+    with pytest.raises(RetargetError, match=r"none.npz: unknown blendshape names corrective00, .*"
+                                            r"corrective11 and 8 more \(expected ICT"):
+        load_user_rig(only_unknown)                     # nothing known at all: refused
     with pytest.raises(RetargetError, match=r"'browInnerUp'.*browInnerUp_L|'browInnerUp_L'.*browInnerUp"):
         load_user_rig(write_folder(tmp_path / "dup", "neutral", proc_rig.neutral, proc_rig.faces,
                                    {"browInnerUp": d, "browInnerUp_L": d}))

@@ -2,6 +2,8 @@
 checkpoint on the user's own blendshape rig (``--rig``)."""
 from __future__ import annotations
 
+import sys
+import warnings
 from pathlib import Path
 
 HELP = "train the network from a config (resumable; torchrun for several processes)"
@@ -25,6 +27,10 @@ def add_arguments(p):
                                  "or ICT-FaceKit's FaceXModel)")
     p.add_argument("--keep-vertices", metavar="A:B",
                    help="use only the rig's vertices A..B-1 (e.g. the skin, without eyes and teeth)")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse rig shapes that have no ICT or ARKit name (correctives, visemes, "
+                        "ICT-FaceKit's PupilDilate_L/R, cheekRaiser_L/R) instead of leaving them "
+                        "out with a one-line warning")
     p.add_argument("--rig-mix", type=float,
                    help="fraction of steps drawn from the rig, the rest procedural (default 0.5)")
     p.add_argument("--steps", type=int, help="override train.steps")
@@ -38,7 +44,8 @@ def add_arguments(p):
 
 def training_config(args) -> tuple[dict, str]:
     """(config, its path) from the arguments: --config, or with --rig the fine-tuning config whose
-    model is the --init checkpoint's; --rig, --keep-vertices, --rig-mix, --steps, --lr and --max-minutes applied."""
+    model is the --init checkpoint's; --rig, --keep-vertices, --strict, --rig-mix, --steps, --lr and
+    --max-minutes applied."""
     from ..config import find_config
     from ..errors import RetargetError
     from ..train import load_checkpoint, load_config
@@ -59,6 +66,8 @@ def training_config(args) -> tuple[dict, str]:
         cfg["data"]["rig"] = args.rig
     if args.keep_vertices is not None:
         cfg["data"]["keep_vertices"] = args.keep_vertices
+    if args.strict:
+        cfg["data"]["rig_strict"] = True
     if args.rig_mix is not None:
         cfg["data"]["rig_mix"] = args.rig_mix
     if args.steps is not None:
@@ -77,14 +86,20 @@ def training_config(args) -> tuple[dict, str]:
 def run(args) -> int:
     from ..errors import RetargetError
     from ..train import Trainer, shutdown_distributed
+    from ..user_rig import UnknownShapeWarning
 
     cfg, config_path = training_config(args)
     out = Path(args.out)
     if (out / "last.pt").exists() and not args.resume:
         raise RetargetError(f"{out}: already holds a run (last.pt); pass --resume to continue it "
                             f"or choose another --out")
-    trainer = Trainer(cfg, out, config_path=config_path, init=args.init,
-                      progress=not args.no_progress)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UnknownShapeWarning)
+        trainer = Trainer(cfg, out, config_path=config_path, init=args.init,
+                          progress=not args.no_progress)
+    if trainer.rank == 0:
+        for w in caught:  # e.g. the rig's shapes left out: one line, not a Python warning
+            print(f"warning: {w.message}", file=sys.stderr)
     if args.resume and trainer.resume():
         print(f"resumed {out / 'last.pt'} at step {trainer.step}")
     metrics = trainer.run()
