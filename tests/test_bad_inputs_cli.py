@@ -101,7 +101,7 @@ def test_output_that_is_an_input(capsys, good, tmp_path):
     os.link(tgt, tmp_path / "hardlink.obj")  # another name of the same file
     refused(capsys, ["animate", tgt, "--weights", w, "-o", tmp_path / "hardlink.obj"],
             ["hardlink.obj"], "refusing to overwrite the input", good, tmp_path)
-    refused(capsys, ["invert", src, "-o", src], [src], "refusing to overwrite the input", good, tmp_path)
+    refused(capsys, ["invert", src, "-o", src], [src], "written as .csv, not .obj", good, tmp_path)
     refused(capsys, ["export-rig", tgt, "-o", tmp_path / "rig.obj"], ["rig.obj"], "written as .glb",
             good, tmp_path)
     refused(capsys, ["animate", tgt, "--weights", w, "-o", tmp_path / "o.csv"], ["o.csv"],
@@ -191,7 +191,7 @@ def test_bad_checkpoints(capsys, good, tmp_path, monkeypatch):
     state["train_config"] = {"evil": Path("x")}  # a pickled object: refused by weights_only
     torch.save(state, tmp_path / "tampered.pt")
     (tmp_path / "garbage.pt").write_bytes(b"not a checkpoint at all")
-    cases = {"other_config.pt": "checkpoint does not match", "tampered.pt": "not a loadable checkpoint",
+    cases = {"other_config.pt": "checkpoint does not match", "tampered.pt": "holds pickled code",
              "garbage.pt": "not a loadable checkpoint", "missing.pt": "checkpoint not found"}
     for name, fragment in cases.items():
         refused(capsys, base + ["--checkpoint", tmp_path / name], [tmp_path / name], fragment, good,

@@ -24,7 +24,7 @@ def run(args) -> int:
     inputs = sequence_files(args.frames)
     if args.source_neutral:
         inputs.append(args.source_neutral)
-    check_output(args.out, inputs)
+    check_output(args.out, inputs, formats=(".csv",))
     frames = load_sequence(args.frames, up=args.up, forward=args.forward, force=args.force)
     neutral = (load_mesh(args.source_neutral, up=args.up, forward=args.forward, force=args.force)
                if args.source_neutral else None)
