@@ -57,12 +57,14 @@ def output_bytes(ext: str, n_frames: int, n_vertices: int, n_faces: int) -> int:
     return n_frames * (per_vertex * n_vertices + per_face * n_faces)
 
 
-def check_output_size(paths: list[Path], n_vertices: int, n_faces: int, force: bool = False) -> None:
-    """RetargetError, before any work, when the frames would not fit: a sequence GLB above
-    MAX_GLB_BYTES, or files larger than the free space of their disk (``force`` skips this)."""
+def check_output_size(paths: list[Path], n: int, n_vertices: int, n_faces: int,
+                      force: bool = False) -> None:
+    """RetargetError, before any work, when ``n`` frames would not fit into ``paths``: a sequence
+    GLB above MAX_GLB_BYTES, or files larger than the free space of their disk (``force`` skips
+    this)."""
     if force:
         return
-    ext, n = paths[0].suffix.lower(), len(paths)
+    ext = paths[0].suffix.lower()
     size = output_bytes(ext, n, n_vertices, n_faces)
     what = f"{n:,} frame(s) of {n_vertices:,} vertices"
     if ext == ".glb" and n > 1 and size > MAX_GLB_BYTES:
@@ -108,7 +110,7 @@ def output_paths(out: str, n_frames: int, inputs: list, fmt: str = "obj", n_vert
     for p in paths:
         check_output(p, inputs)
     if n_vertices:
-        check_output_size(paths, n_vertices, n_faces, force)
+        check_output_size(paths, n_frames, n_vertices, n_faces, force)
     return paths
 
 
