@@ -100,7 +100,9 @@ def check_mesh(mesh: Mesh, path=None) -> Mesh:
     diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
     if not (face_areas(v, f) > 1e-12 * diag * diag).any():
         raise RetargetError(f"{where}: all {len(f)} faces are degenerate (zero area)")
-    used = v[np.unique(f)]
+    mask = np.zeros(len(v), bool)
+    mask[f.ravel()] = True
+    used = v[mask]
     spread = np.linalg.eigvalsh(np.cov(used - used.mean(axis=0), rowvar=False))  # ascending, σ²
     if spread[1] <= (COLLINEAR_TOLERANCE ** 2) * spread[2]:
         raise RetargetError(f"{where}: all {len(f)} faces are degenerate (the vertices lie on a line, "
