@@ -101,10 +101,18 @@ def temporary_prefix(path) -> str:
     return f".{Path(path).name}.pid{os.getpid()}."
 
 
+_CLEANED: set = set()  # folders already cleaned by this process
+
+
 def remove_stale_temporaries(folder) -> None:
     """Remove the temporary files and staging folders (named by :func:`temporary_prefix`, then a
     random part and ``.tmp``) in ``folder`` whose writing process no longer runs: what a SIGKILL
-    left behind. Those of running processes (another write in progress) are kept."""
+    left behind. Those of running processes (another write in progress) are kept. Each folder is
+    looked at once per process (a take of many frames does not list its folder per frame)."""
+    key = os.path.abspath(folder)
+    if key in _CLEANED:
+        return
+    _CLEANED.add(key)
     try:
         entries = list(os.scandir(folder))
     except OSError:
