@@ -19,7 +19,10 @@ on. An expression mesh may therefore reuse the operators of its neutral mesh (th
 the caller simply passes the neutral's :class:`Operators` / :class:`TorchOperators`.
 
 ``load_or_compute_operators`` caches by content hash on disk (``$RETARGET_CACHE`` or
-``~/.cache/retarget/operators``) and in a small in-process LRU.
+``~/.cache/retarget/operators``) and in a small in-process LRU. The disk cache is optional: it is
+kept under ``$RETARGET_CACHE_MAX_MB`` megabytes (default 2048; least recently used entries go
+first), switched off by ``RETARGET_NO_CACHE=1``, and a folder that cannot be written is skipped
+with one :class:`CacheWarning` (the operators are then computed each time).
 
 Run ``python -m nets.geometry`` for the preparation-cost benchmark (:func:`benchmark_operators`).
 """
@@ -57,8 +60,19 @@ EIG_SHIFT = 1e-8
 EIG_RETRIES = 4
 #: Entries of the in-process LRU of :func:`load_or_compute_operators`.
 MEMORY_CACHE_SIZE = 8
+#: Default size limit of the disk cache, megabytes (``$RETARGET_CACHE_MAX_MB``).
+DISK_CACHE_MAX_MB = 2048
+#: A cache temporary file older than this (seconds) was left by a killed writer and is removed.
+STALE_TMP_SECONDS = 3600.0
+
+
+class CacheWarning(UserWarning):
+    """The disk cache of operators could not be used (the job goes on without it)."""
+
 
 _MEMORY_CACHE: "OrderedDict[str, Operators]" = OrderedDict()
+#: Cache folders found unwritable in this process (warned about once, then skipped).
+_UNWRITABLE: set = set()
 
 
 @dataclass(frozen=True)
@@ -341,6 +355,49 @@ def default_cache_dir() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "retarget" / "operators"
 
 
+def disk_cache_enabled() -> bool:
+    """False when ``$RETARGET_NO_CACHE`` is set to anything but "" or "0"."""
+    return os.environ.get("RETARGET_NO_CACHE", "") in ("", "0")
+
+
+def disk_cache_max_bytes() -> int:
+    """``$RETARGET_CACHE_MAX_MB`` (default DISK_CACHE_MAX_MB) in bytes; a value that is not a
+    number >= 0 gives a CacheWarning and the default."""
+    env = os.environ.get("RETARGET_CACHE_MAX_MB", "")
+    try:
+        mb = float(env) if env else DISK_CACHE_MAX_MB
+        if not mb >= 0 or mb == float("inf"):
+            raise ValueError
+    except ValueError:
+        warnings.warn(f"RETARGET_CACHE_MAX_MB={env[:40]!r} is not a number of megabytes >= 0; using "
+                      f"{DISK_CACHE_MAX_MB}", CacheWarning, stacklevel=3)
+        mb = DISK_CACHE_MAX_MB
+    return int(mb * 2**20)
+
+
+def prune_cache(folder: Path, max_bytes: int, keep: Path | None = None) -> None:
+    """Delete the least recently used ``*.npz`` entries of ``folder`` (by modification time, which a
+    cache hit refreshes) until they total at most ``max_bytes`` (``keep`` is never deleted), and
+    temporary files older than STALE_TMP_SECONDS (left by a killed writer)."""
+    now, entries = time.time(), []
+    for p in folder.iterdir():
+        try:
+            st = p.stat()
+        except OSError:
+            continue
+        if p.suffix == ".tmp" and now - st.st_mtime > STALE_TMP_SECONDS:
+            p.unlink(missing_ok=True)
+        elif p.suffix == ".npz":
+            entries.append((st.st_mtime, st.st_size, p))
+    total = sum(size for _, size, _ in entries)
+    for _, size, p in sorted(entries, key=lambda e: e[0]):
+        if total <= max_bytes:
+            break
+        if p != keep:
+            p.unlink(missing_ok=True)
+            total -= size
+
+
 def operators_key(verts, faces, k: int) -> str:
     """sha256 hex digest of (verts as float32, faces as int64, k, OPERATORS_VERSION)."""
     h = hashlib.sha256()
@@ -401,22 +458,35 @@ def load_or_compute_operators(verts, faces, k: int = 64, cache_dir=None, name: s
 
     The key is :func:`operators_key`. cache_dir: folder for ``<key>.npz`` files, default
     :func:`default_cache_dir`. A missing or corrupt file is (re)computed and rewritten atomically, so
-    several processes may fill the same entry concurrently.
+    several processes may fill the same entry concurrently. After a write the folder is pruned to
+    :func:`disk_cache_max_bytes`; with ``RETARGET_NO_CACHE`` set the disk is not used, and a folder
+    that cannot be written gives a CacheWarning (once per folder) and no disk cache.
     """
     key = operators_key(verts, faces, k)
     if key in _MEMORY_CACHE:
         _MEMORY_CACHE.move_to_end(key)
         return _MEMORY_CACHE[key]
-    path = Path(cache_dir if cache_dir is not None else default_cache_dir()) / f"{key}.npz"
+    folder = Path(cache_dir if cache_dir is not None else default_cache_dir())
+    path = folder / f"{key}.npz"
+    use_disk = disk_cache_enabled() and folder not in _UNWRITABLE
     ops = None
-    if path.exists():
+    if use_disk and path.is_file():
         try:
             ops = _load(path, len(verts))
-        except ValueError:
+            os.utime(path)  # recently used: pruned last
+        except (ValueError, OSError):
             ops = None
     if ops is None:
         ops = compute_operators(verts, faces, k, name=name)
-        _save(ops, path)
+        if use_disk:
+            try:
+                _save(ops, path)
+                prune_cache(folder, disk_cache_max_bytes(), keep=path)
+            except OSError as exc:
+                _UNWRITABLE.add(folder)
+                warnings.warn(f"operator cache {folder} cannot be written ({exc.strerror or exc}); "
+                              "going on without it (set RETARGET_CACHE to another folder, or "
+                              "RETARGET_NO_CACHE=1)", CacheWarning, stacklevel=2)
     _MEMORY_CACHE[key] = ops
     while len(_MEMORY_CACHE) > MEMORY_CACHE_SIZE:
         _MEMORY_CACHE.popitem(last=False)

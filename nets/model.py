@@ -35,6 +35,15 @@ CANONICAL_FRAMES = ("bbox", "face")   # NFSConfig.canonical (retarget.canonical.
 VERTEX_FEATURE_DIM = 6  # canonical position (3) + unit vertex normal (3)
 
 
+#: Upper bounds of NFSConfig's integer fields: several times the paper's sizes, low enough that a
+#: tampered or mistyped config (a checkpoint is not trusted) cannot ask for a model of terabytes
+#: or an eigen-decomposition that never ends.
+MAX_CONFIG_VALUES = dict(code_dim=2048, image_code_dim=2048, n_facs=2048, image_size=1024,
+                         image_channels=16, cnn_width=512, enc_width=2048, enc_blocks=32, k_eig=512,
+                         n_segments=256, skin_hidden=2048, skin_layers=32, decoder_width=2048,
+                         decoder_layers=32, norm_groups=512)
+
+
 @dataclass(frozen=True)
 class NFSConfig:
     """Every dimension and switch of ``NFSModel``; plain types only (checkpoint friendly).
@@ -91,18 +100,19 @@ class NFSConfig:
             elif f.type == "float":
                 ok = isinstance(value, (int, float)) and not isinstance(value, bool)
             else:
-                ok = isinstance(value, int) and not isinstance(value, bool) and value >= 1
+                ok = (isinstance(value, int) and not isinstance(value, bool)
+                      and 1 <= value <= MAX_CONFIG_VALUES[f.name])
             if not ok:
                 raise ValueError(f"NFSConfig.{f.name}: expected a {f.type}"
-                                 f"{' >= 1' if f.type == 'int' else ''}"
+                                 f"{f' in 1..{MAX_CONFIG_VALUES[f.name]}' if f.type == 'int' else ''}"
                                  f"{' in ' + str(CANONICAL_FRAMES) if f.type == 'str' else ''}, "
-                                 f"got {value!r}")
+                                 f"got {str(value)[:40]!r}")
         if self.n_facs > self.code_dim:
             raise ValueError(f"NFSConfig: n_facs ({self.n_facs}) must not exceed code_dim "
                              f"({self.code_dim})")
         if self.decoder_layers < 2:
             raise ValueError(f"NFSConfig.decoder_layers must be >= 2, got {self.decoder_layers}")
-        if not 0.0 <= self.dropout < 1.0:
+        if not 0.0 <= self.dropout < 1.0:  # NaN too
             raise ValueError(f"NFSConfig.dropout must be in [0, 1), got {self.dropout}")
 
     @classmethod
@@ -132,6 +142,8 @@ class NFSConfig:
     def from_dict(cls, d: dict[str, Any]) -> "NFSConfig":
         """Inverse of ``to_dict``; missing keys take the defaults, unknown keys raise ValueError.
         Keys of earlier versions that no longer mean anything (``_RETIRED_KEYS``) are dropped."""
+        if not isinstance(d, dict):
+            raise TypeError(f"NFSConfig: expected a mapping of settings, got a {type(d).__name__}")
         d = {k: v for k, v in d.items() if k not in _RETIRED_KEYS}
         unknown = sorted(set(d) - {f.name for f in dataclasses.fields(cls)})
         if unknown:

@@ -1,49 +1,116 @@
 """Checkpoint files: plain types and tensors only, loaded with ``torch.load(weights_only=True)``
-(a tampered file carrying pickled objects is refused), written atomically."""
+(a tampered file carrying pickled objects is refused), written atomically.
+
+A checkpoint is data, never code, and its contents are not trusted: :func:`load_checkpoint` checks
+every field the project reads (the model config against ``NFSConfig``'s types and bounds, the
+weights against the shapes that config gives, before any memory is allocated for them), so an
+absurd or mistyped value is one error line naming the file, never a hang or a traceback.
+"""
 from __future__ import annotations
 
-import os
+import math
+import pickle
 from pathlib import Path
 
 import torch
 
+from data_synth.facs import N_FACS
 from nets.model import NFSConfig, NFSModel
 
 from .errors import RetargetError
+from .io import atomic_output, regular_file
+from .prepare import IMAGE_CHANNELS
 
 CHECKPOINT_FORMAT = "retarget-checkpoint/1"
 
 
 def save_checkpoint(path: Path, state: dict) -> None:
-    """Write atomically (temporary file in the same folder, then rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    """Write atomically (``retarget.io.atomic_output``: temporary file in the same folder, then
+    rename; a killed writer's leftovers are removed by the next write there)."""
+    with atomic_output(path) as tmp:
+        torch.save(state, tmp)
 
 
 def load_checkpoint(path) -> dict:
-    """Load a checkpoint with ``weights_only=True``; RetargetError names the file and the problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise RetargetError(f"{path}: checkpoint not found")
+    """Load a checkpoint with ``weights_only=True`` and check its fields (:func:`check_state`);
+    RetargetError names the file and the problem."""
+    path = regular_file(path, "checkpoint", missing="checkpoint not found")
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # torch raises many types for a corrupt or tampered file
+    except pickle.UnpicklingError as e:  # torch's message advises turning the protection off: not shown
+        if "unsupported global" in str(e).lower():  # a reference to a class or function
+            raise RetargetError(f"{path}: holds pickled code (Python objects, not only tensors and "
+                                "plain values) and was refused: a checkpoint is data, never code") from None
+        raise RetargetError(f"{path}: not a loadable checkpoint (corrupt, or not a checkpoint "
+                            "file)") from None
+    except Exception as e:  # torch raises many types for a corrupt file
         raise RetargetError(f"{path}: not a loadable checkpoint ({type(e).__name__}: "
-                            f"{str(e).splitlines()[0][:200]})") from None
+                            f"{(str(e).splitlines() or [''])[0][:200]})") from None
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise RetargetError(f"{path}: not a retarget checkpoint (format "
-                            f"{state.get('format') if isinstance(state, dict) else type(state).__name__!r})")
+                            f"{str(state.get('format'))[:60] if isinstance(state, dict) else type(state).__name__!r})")
+    check_state(state, path)
     return state
 
 
-def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:
-    """Build the NFSModel of a loaded checkpoint and load its weights."""
+def checkpoint_config(state: dict, path="checkpoint") -> NFSConfig:
+    """The NFSConfig of a checkpoint's ``model_config``, checked (types and bounds, see
+    ``NFSConfig``; renders with a channel count the pipeline makes; 53 FACS weights)."""
+    raw = state.get("model_config")
+    if not isinstance(raw, dict):
+        raise RetargetError(f"{path}: the checkpoint's model_config is a {type(raw).__name__}, not a "
+                            "mapping of model settings")
     try:
-        model = NFSModel(NFSConfig.from_dict(state["model_config"]))
-        model.load_state_dict(state["model"])
-    except (KeyError, ValueError, RuntimeError) as e:
+        cfg = NFSConfig.from_dict(raw)
+    except (TypeError, ValueError) as e:
+        raise RetargetError(f"{path}: bad model_config in the checkpoint ({str(e)[:200]})") from None
+    if cfg.image_channels not in IMAGE_CHANNELS or cfg.n_facs != N_FACS:
+        raise RetargetError(f"{path}: bad model_config in the checkpoint (image_channels "
+                            f"{cfg.image_channels}, n_facs {cfg.n_facs}; this version renders "
+                            f"{sorted(IMAGE_CHANNELS)} channels and drives {N_FACS} FACS weights)")
+    return cfg
+
+
+def check_state(state: dict, path="checkpoint") -> None:
+    """RetargetError naming ``path`` unless the fields the project reads are what it writes: a
+    valid model config, ``model`` a mapping of names to tensors, ``step`` an integer >= 0,
+    ``elapsed_s`` a finite number >= 0, ``optimizer`` / ``train_config`` mappings (when present)."""
+    checkpoint_config(state, path)
+    model = state.get("model")
+    if not isinstance(model, dict) or not all(isinstance(k, str) and isinstance(v, torch.Tensor)
+                                              for k, v in model.items()):
+        raise RetargetError(f"{path}: the checkpoint's model is not a mapping of names to tensors")
+    step, elapsed = state.get("step", 0), state.get("elapsed_s", 0.0)
+    if not isinstance(step, int) or isinstance(step, bool) or step < 0:
+        raise RetargetError(f"{path}: the checkpoint's step {str(step)[:40]!r} is not an integer >= 0")
+    if (not isinstance(elapsed, (int, float)) or isinstance(elapsed, bool) or not math.isfinite(elapsed)
+            or elapsed < 0):
+        raise RetargetError(f"{path}: the checkpoint's elapsed_s {str(elapsed)[:40]!r} is not a "
+                            "number >= 0")
+    for key in ("optimizer", "train_config"):
+        if key in state and not isinstance(state[key], dict):
+            raise RetargetError(f"{path}: the checkpoint's {key} is not a mapping")
+
+
+def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:
+    """Build the NFSModel of a loaded checkpoint and load its weights. The shapes its config gives
+    are compared with the weights held on the ``meta`` device first (no memory), so a config that
+    claims another (or a huge) model is refused before it is built."""
+    cfg = checkpoint_config(state, path)
+    held = state.get("model")
+    try:
+        with torch.device("meta"):
+            expected = {k: tuple(v.shape) for k, v in NFSModel(cfg).state_dict().items()}
+        if not isinstance(held, dict):
+            raise KeyError("model")
+        got = {k: tuple(v.shape) for k, v in held.items()}
+        if got != expected:
+            diff = sorted(set(got) ^ set(expected)) or [k for k in expected if got[k] != expected[k]]
+            raise ValueError(f"{diff[0]}: the config gives {expected.get(diff[0])}, the file holds "
+                             f"{got.get(diff[0])}")
+        model = NFSModel(cfg)
+        model.load_state_dict(held)
+    except (KeyError, ValueError, RuntimeError, AttributeError) as e:
         raise RetargetError(f"{path}: checkpoint does not match this version's model "
                             f"({str(e).splitlines()[0][:200]})") from None
     return model

@@ -8,8 +8,9 @@ import importlib
 import os
 import re
 import sys
+import warnings
 
-from .errors import RetargetError
+from .errors import RetargetError, RetargetWarning
 
 # subcommand name -> module under retarget.commands
 COMMANDS = {
@@ -38,8 +39,16 @@ def _available():
     return out
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with the project's one-line user errors: a bad option raises RetargetError
+    (``error: retarget CMD: <problem> (see retarget CMD --help)``, exit status 2)."""
+
+    def error(self, message):
+        raise RetargetError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="retarget",
         description="Mesh-agnostic facial expression retargeting (Neural Face Skinning).",
     )
@@ -72,27 +81,54 @@ def join_axis_values(argv: list[str]) -> list[str]:
     return out
 
 
+MAX_ERROR_CHARS = 1000  # a message quoting a hostile file is cut to this
+
+
+def one_line(message) -> str:
+    """A message as one line of at most MAX_ERROR_CHARS characters."""
+    text = " ".join(str(message).split())
+    return text if len(text) <= MAX_ERROR_CHARS else text[:MAX_ERROR_CHARS - 3] + "..."
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. User errors (RetargetError) print ``error: <message>`` as the last line of
+    stderr and return 2. The project's warnings (RetargetWarning) print ``warning: <message>`` at
+    once; other Python warnings (numpy, torch) are held and printed after a command that succeeds,
+    never before the error of one that fails."""
     parser = build_parser()
-    args = parser.parse_args(join_axis_values(sys.argv[1:] if argv is None else list(argv)))
-    if not getattr(args, "_run", None):
-        parser.print_help()
-        return 1
-    try:
-        return int(args._run(args) or 0)
-    except RetargetError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except MemoryError:
-        print(f"error: out of memory running {args.command}; try a smaller mesh or fewer frames",
-              file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # output piped into e.g. `head`, which closed early: not an error
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
+    held = []
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = f"warning: {one_line(message)}"
+        if issubclass(category, RetargetWarning):
+            print(text, file=sys.stderr)
+        elif text not in held:
+            held.append(text)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        try:
+            args = parser.parse_args(join_axis_values(sys.argv[1:] if argv is None else list(argv)))
+            if not getattr(args, "_run", None):
+                parser.print_help()
+                return 1
+            status = int(args._run(args) or 0)
+        except RetargetError as e:
+            print(f"error: {one_line(e)}", file=sys.stderr)
+            return 2
+        except MemoryError:
+            print(f"error: out of memory running {args.command}; try a smaller mesh or fewer frames",
+                  file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("interrupted", file=sys.stderr)
+            return 130
+        except BrokenPipeError:  # output piped into e.g. `head`, which closed early: not an error
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 0
+    for text in held:
+        print(text, file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

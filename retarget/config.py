@@ -29,6 +29,9 @@ def find_config(spec, kind: str) -> Path:
     path = Path(spec)
     if path.is_file():
         return path
+    if path.exists():  # a folder, a FIFO, a device: named as such, not called missing
+        from .io import regular_file
+        regular_file(path, f"{kind} config file")
     name = path.name if path.suffix == ".yaml" else f"{path.name}.yaml"
     if path.parent == Path(".") or path.parent.as_posix().endswith(f"configs/{kind}"):
         shipped = configs_dir() / kind / name

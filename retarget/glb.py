@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RetargetError
-from .io import atomic_output
+from .io import atomic_output, check_fps
 from .mesh import vertex_normals
 
 _FLOAT, _UINT = 5126, 5125
@@ -93,7 +93,7 @@ def write_rig_glb(path, neutral, faces, deltas, names, animation=None, fps: floa
         w = np.asarray(animation, dtype=np.float32)
         if w.ndim != 2 or w.shape[1] != len(names):
             raise ValueError(f"animation must be (T,{len(names)}) weights, got {w.shape}")
-        times = np.arange(len(w), dtype=np.float32) / np.float32(fps)
+        times = np.arange(len(w), dtype=np.float32) / np.float32(check_fps(fps))
         sampler = pygltflib.AnimationSampler(input=b.add(times, "SCALAR"), output=b.add(w.ravel(), "SCALAR"),
                                              interpolation=interpolation)
         channel = pygltflib.AnimationChannel(sampler=0, target=pygltflib.AnimationChannelTarget(node=0, path="weights"))

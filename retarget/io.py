@@ -13,23 +13,34 @@ the file. Morph targets, skins and materials are ignored.
 
 Every failure a user can cause (missing file, folder given, unknown extension, unreadable or
 truncated file, empty mesh, NaN coordinates, point cloud, bad indices, frames that do not match)
-raises :class:`RetargetError` with one line naming the file. Writes are atomic (temporary file in
-the destination folder, then ``os.replace``), so an error never leaves a partial output behind, and
-:func:`check_output` refuses an output that is one of the inputs.
+raises :class:`RetargetError` with one line naming the file. Only regular files are read (a FIFO or
+device would block or never end; a symlink loop is named as such), and a glTF's external buffers
+must be regular files inside the glTF's own folder. Text is UTF-8 (with or without a byte-order
+mark), UTF-16 or, failing those, Latin-1. Writes are atomic (temporary file in the destination
+folder, then ``os.replace``), so an error never leaves a partial output behind; the temporary names
+carry the writer's process id, and leftovers of a killed writer (SIGKILL) are removed by the next
+write into the same folder. :func:`check_output` refuses an output that is one of the inputs.
 """
 from __future__ import annotations
 
 import base64
+import codecs
+import errno
 import glob as globmod
+import math
 import os
 import re
+import shutil
+import stat
 import tempfile
+import urllib.parse
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from .errors import RetargetError
+from .errors import RetargetError, RetargetWarning
 from .mesh import Mesh, as_mesh, check_mesh, is_mesh_like
 
 READ_FORMATS = (".obj", ".ply", ".off", ".glb", ".gltf")
@@ -40,6 +51,11 @@ MAX_VERTICES = 10_000_000  # larger meshes are refused unless force=True
 # features (~0.2 KiB), per-vertex decoding of 128-wide codes in chunks and the outputs (~1 KiB).
 BYTES_PER_VERTEX = 2048
 _MIN_BYTES_PER_VERTEX = 8  # no format stores a vertex in fewer bytes ("v 0 0 0\n")
+#: glTF extensions that a file may require and this reader still reads right: they change
+#: materials, textures or lights, not the geometry (KHR_mesh_quantization: integer positions,
+#: which the accessor reader maps). Any other required extension (Draco, meshopt) is refused.
+GLTF_EXTENSIONS_READ = ("KHR_mesh_quantization", "KHR_lights_punctual", "KHR_materials_*",
+                        "KHR_texture_*", "EXT_texture_webp")
 _AXES = {f"{s}{a}": (1.0 if s == "+" else -1.0) * np.eye(3)[i] for i, a in enumerate("xyz") for s in "+-"}
 
 
@@ -58,7 +74,8 @@ def atomic_output(path):
         raise RetargetError(f"{path}: is a folder, not an output file")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
+        remove_stale_temporaries(path.parent)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=temporary_prefix(path), suffix=f".tmp{path.suffix}")
     except OSError as e:
         raise RetargetError(f"{path}: cannot write to folder {path.parent} ({e.strerror or e})") from None
     os.close(fd)
@@ -75,12 +92,121 @@ def atomic_output(path):
             os.remove(tmp)
 
 
-def check_output(out_path, input_paths) -> None:
-    """Raise RetargetError if ``out_path`` is (resolves to, or is a hard link of) any input file."""
+_TEMPORARY = re.compile(r"^\..+\.pid(\d+)\.[A-Za-z0-9_]+\.tmp")
+
+
+def temporary_prefix(path) -> str:
+    """Name prefix of the temporary files and staging folders written for ``path``: hidden, with
+    this process's id, so :func:`remove_stale_temporaries` can tell a killed writer's leftovers."""
+    return f".{Path(path).name}.pid{os.getpid()}."
+
+
+_CLEANED: set = set()  # folders already cleaned by this process
+
+
+def remove_stale_temporaries(folder) -> None:
+    """Remove the temporary files and staging folders (named by :func:`temporary_prefix`, then a
+    random part and ``.tmp``) in ``folder`` whose writing process no longer runs: what a SIGKILL
+    left behind. Those of running processes (another write in progress) are kept. Each folder is
+    looked at once per process (a take of many frames does not list its folder per frame)."""
+    key = os.path.abspath(folder)
+    if key in _CLEANED:
+        return
+    _CLEANED.add(key)
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return
+    for entry in entries:
+        m = _TEMPORARY.match(entry.name)
+        if not m or _process_runs(int(m.group(1))):
+            continue
+        if entry.is_dir(follow_symlinks=False):
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            try:
+                os.remove(entry.path)
+            except OSError:
+                pass
+
+
+def _process_runs(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True  # another user's process (or an absurd number): leave its files alone
+    return True
+
+
+def _resolve(path: Path) -> Path:
+    """``path.resolve()``; RetargetError naming it for a symlink loop."""
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError):
+        raise RetargetError(f"{path}: is a symlink loop") from None
+
+
+def regular_file(path, what: str = "file", missing: str = "no such file") -> Path:
+    """``path`` as a Path if it is a regular file (symlinks followed); else RetargetError naming it:
+    ``missing`` (also a dangling symlink), a folder, a symlink loop, or a FIFO, device or socket
+    (reading those blocks forever or never ends). ``what`` names the file wanted in the message."""
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        raise RetargetError(f"{path}: {missing}") from None
+    except OSError as e:
+        problem = "is a symlink loop" if e.errno == errno.ELOOP else f"cannot read ({e.strerror or e})"
+        raise RetargetError(f"{path}: {problem}") from None
+    if stat.S_ISDIR(mode):
+        raise RetargetError(f"{path}: is a folder, not a {what}")
+    if not stat.S_ISREG(mode):
+        kind = ("a named pipe (FIFO)" if stat.S_ISFIFO(mode) else "a device" if stat.S_ISCHR(mode)
+                or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+        raise RetargetError(f"{path}: is {kind}, not a {what}; only regular files are read")
+    return path
+
+
+def read_text(path) -> str:
+    """A text file as str: UTF-8 (a byte-order mark dropped), UTF-16 (with a byte-order mark, or
+    ASCII text with every other byte zero), else Latin-1 (old exporters); RetargetError for binary
+    data (NUL characters)."""
+    path = Path(path)
+    data = path.read_bytes()
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        codec = "utf-16"
+    elif len(data) >= 2 and len(data) % 2 == 0 and not data[1::2].strip(b"\0") and b"\0" not in data[0::2]:
+        codec = "utf-16-le"
+    elif len(data) >= 2 and len(data) % 2 == 0 and not data[0::2].strip(b"\0") and b"\0" not in data[1::2]:
+        codec = "utf-16-be"
+    else:
+        codec = "utf-8-sig"
+    try:
+        text = data.decode(codec)
+    except UnicodeDecodeError:
+        text = data.decode("latin-1") if codec == "utf-8-sig" else "\0"
+    if "\0" in text:
+        raise RetargetError(f"{path}: holds binary data, not a text {path.suffix[1:].upper()} file")
+    return text
+
+
+def check_output(out_path, input_paths, formats: tuple[str, ...] | None = None) -> None:
+    """Raise RetargetError if ``out_path`` is ``-`` (standard output is not written), a symlink loop,
+    not one of ``formats`` (extensions, if given) or (resolves to, or is a hard link of) any input
+    file."""
     out = Path(out_path)
+    if str(out_path) == "-":
+        raise RetargetError("-: writing to standard output is not supported; give an output file "
+                            "(./- for a file named -)")
+    if formats is not None and out.suffix.lower() not in formats:
+        raise RetargetError(f"{out}: this output is written as {' or '.join(formats)}, not "
+                            f"{out.suffix or 'a file without extension'}")
+    out_resolved = _resolve(out)
     for inp in input_paths:
         inp = Path(inp)
-        same = out.resolve() == inp.resolve()
+        same = out_resolved == _resolve(inp)
         if not same and out.exists() and inp.exists():
             same = os.path.samefile(out, inp)
         if same:
@@ -152,9 +278,21 @@ def peek_vertex_count(path) -> int | None:
             gltf = _load_gltf(path)
             return sum(gltf.accessors[p.attributes.POSITION].count
                        for m in gltf.meshes for p in m.primitives if p.attributes.POSITION is not None)
-    except (OSError, RetargetError, StopIteration, IndexError, TypeError):
+    except Exception:  # a file the header cannot be read from: the reader will say why
         return None
     return None
+
+
+def check_fps(fps, where: str = "--fps") -> float:
+    """``fps`` as a float if it is a finite number above 0; else RetargetError naming ``where``
+    (animation times are t / fps, and the filters divide by it)."""
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise RetargetError(f"{where} {str(fps)[:40]}: the frame rate must be a finite number above 0")
+    return value
 
 
 def estimate_memory(n_vertices: int) -> int:
@@ -181,11 +319,7 @@ def load_mesh(path, up: str | None = None, forward: str | None = None, force: bo
     Meshes above ``max_vertices`` are refused before parsing unless ``force``.
     Returns Mesh(vertices (V,3) float64 in the file's units, faces (F,3) int64, name=str(path)).
     """
-    path = Path(path)
-    if not path.exists():
-        raise RetargetError(f"{path}: no such file")
-    if path.is_dir():
-        raise RetargetError(f"{path}: is a folder, not a mesh file")
+    path = regular_file(path, "mesh file")
     ext = path.suffix.lower()
     if ext not in READ_FORMATS:
         raise RetargetError(f"{path}: unknown mesh format {ext or '(no extension)'}; "
@@ -202,9 +336,40 @@ def load_mesh(path, up: str | None = None, forward: str | None = None, force: bo
         reason = f"{type(e).__name__}: {e}".splitlines()[0]
         raise RetargetError(f"{path}: cannot read as {ext[1:].upper()} ({reason})") from None
     mesh = check_mesh(Mesh(verts, faces, name=str(path)), path)
+    warn_if_several_heads(mesh, path)
     if up is not None or forward is not None:
         mesh = Mesh(mesh.vertices @ axis_rotation(up, forward).T, mesh.faces, mesh.name)
     return mesh
+
+
+class SeveralHeadsWarning(RetargetWarning):
+    """A mesh file holds two or more similar parts side by side (two heads?)."""
+
+
+def warn_if_several_heads(mesh: Mesh, path) -> None:
+    """SeveralHeadsWarning if the two largest connected parts of the mesh each hold at least a
+    quarter of its vertices and their bounding boxes are apart: most likely two heads in one file,
+    which the network would treat as one. (Eyes, teeth and other small parts do not count.)"""
+    import scipy.sparse
+    from scipy.sparse.csgraph import connected_components
+
+    f, n = mesh.faces, mesh.n_vertices
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+    graph = scipy.sparse.coo_matrix((np.ones(len(edges), np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    if count < 2:
+        return
+    used = np.zeros(n, bool)
+    used[f.ravel()] = True
+    sizes = np.bincount(labels[used], minlength=count)
+    a, b = np.argsort(sizes)[::-1][:2]
+    if sizes[b] < 0.25 * used.sum():
+        return
+    va, vb = mesh.vertices[labels == a], mesh.vertices[labels == b]
+    if (va.min(0) > vb.max(0)).any() or (vb.min(0) > va.max(0)).any():
+        warnings.warn(f"{path}: holds {count} disconnected parts, two of them of similar size side by "
+                      f"side ({sizes[a]:,} and {sizes[b]:,} vertices): two heads? The file is "
+                      "treated as one head", SeveralHeadsWarning, stacklevel=3)
 
 
 def _read_ply(path: Path):
@@ -215,17 +380,6 @@ def _read_ply(path: Path):
     verts = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)  # PointCloud: none
     return verts, faces.reshape(-1, 3)
-
-
-def _read_text(path: Path) -> str:
-    """A text mesh file as str: binary junk refused, UTF-8 or else Latin-1 (old exporters)."""
-    data = path.read_bytes()
-    if b"\0" in data:
-        raise RetargetError(f"{path}: holds binary data, not a text {path.suffix[1:].upper()} file")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError:
-        return data.decode("latin-1")
 
 
 def _fan(polygons) -> np.ndarray:
@@ -239,17 +393,19 @@ def _read_obj(path: Path):
     lines, whatever the objects, groups and materials (trimesh would split those into parts);
     ``a/b/c`` and negative (relative) indices accepted, polygons fanned, everything else ignored."""
     verts, polygons = [], []
-    for raw in _read_text(path).splitlines():
+    for line, raw in enumerate(read_text(path).splitlines(), start=1):
         tok = raw.split()
         if not tok:
             continue
         if tok[0] == "v":
             if len(tok) < 4:
-                raise ValueError(f"a vertex line has fewer than 3 coordinates: {raw.strip()!r}")
+                raise ValueError(f"a vertex line has fewer than 3 coordinates: {raw.strip()[:80]!r}")
             verts.append(tok[1:4])
         elif tok[0] == "f":
             n = len(verts)
             idx = [int(t.split("/")[0]) for t in tok[1:]]
+            if 0 in idx:
+                raise RetargetError(f"{path}: line {line}: face index 0 (OBJ vertex indices start at 1)")
             polygons.append([i - 1 if i > 0 else n + i for i in idx])
     return np.array(verts, dtype=np.float64).reshape(-1, 3), _fan(polygons)
 
@@ -257,7 +413,7 @@ def _read_obj(path: Path):
 def _read_off(path: Path):
     """OFF (also COFF/NOFF/..., whose extra per-vertex values are ignored) -> vertices (V,3),
     faces (F,3); polygons fanned, comments (#) allowed. (trimesh mis-reads OFF polygons.)"""
-    lines = [ln.split() for ln in (raw.split("#", 1)[0] for raw in _read_text(path).splitlines())
+    lines = [ln.split() for ln in (raw.split("#", 1)[0] for raw in read_text(path).splitlines())
              if ln.strip()]
     if not lines or not lines[0][0].endswith("OFF"):
         raise ValueError("the file does not start with OFF")
@@ -284,16 +440,45 @@ _GL_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5
 _GL_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
+def _check_gltf_extensions(gltf, path: Path) -> None:
+    """RetargetError naming the required extensions that this reader does not read (compressed
+    geometry would otherwise be read as garbage)."""
+    from fnmatch import fnmatchcase
+
+    unknown = [e for e in (gltf.extensionsRequired or [])
+               if not any(fnmatchcase(str(e), pat) for pat in GLTF_EXTENSIONS_READ)]
+    if unknown:
+        raise RetargetError(f"{path}: requires the glTF extension(s) {', '.join(map(str, unknown[:5]))}, "
+                            "which this reader does not support (compressed geometry?); re-export "
+                            "without compression")
+
+
 def _gltf_buffers(gltf, path: Path) -> list[bytes]:
-    """The bytes of every glTF buffer (GLB chunk, data URI or external file beside the file)."""
-    out = []
-    for buf in gltf.buffers:
+    """The bytes of every glTF buffer: the GLB chunk, a data URI or a file given by a relative URI,
+    which must be a regular file inside the glTF's folder (an absolute path, another scheme, a
+    device or a path escaping the folder is refused); at most ``byteLength`` bytes are read."""
+    out, folder = [], _resolve(path.parent)
+    for i, buf in enumerate(gltf.buffers):
         if buf.uri is None:
             out.append(gltf.binary_blob() or b"")
-        elif buf.uri.startswith("data:"):
+            continue
+        if buf.uri.startswith("data:"):
             out.append(base64.b64decode(buf.uri.split(",", 1)[1]))
-        else:
-            out.append((path.parent / buf.uri).read_bytes())
+            continue
+        uri = urllib.parse.unquote(buf.uri)
+        where = f"{path}: buffer {i} (uri {buf.uri[:100]!r})"
+        if urllib.parse.urlsplit(buf.uri).scheme or os.path.isabs(uri):
+            raise RetargetError(f"{where} is not a relative path; a glTF may only use files in its own folder")
+        file = path.parent / uri
+        if not _resolve(file).is_relative_to(folder):
+            raise RetargetError(f"{where} points outside the glTF's folder {path.parent}")
+        try:
+            regular_file(file, "buffer file")
+        except RetargetError as e:
+            raise RetargetError(f"{where}: {str(e).split(': ', 1)[1]}") from None
+        size = buf.byteLength if isinstance(buf.byteLength, int) and buf.byteLength >= 0 else None
+        with open(file, "rb") as fh:
+            out.append(fh.read(size) if size is not None else fh.read())
     return out
 
 
@@ -339,6 +524,7 @@ def _read_gltf(path: Path):
     """GLB/GLTF -> vertices (V,3), faces (F,3): every triangle primitive of the default scene,
     concatenated depth-first in scene order with world transforms applied."""
     gltf = _load_gltf(path)
+    _check_gltf_extensions(gltf, path)
     buffers = _gltf_buffers(gltf, path)
     if gltf.scenes:
         roots = gltf.scenes[gltf.scene or 0].nodes or []
@@ -346,9 +532,12 @@ def _read_gltf(path: Path):
         children = {c for n in gltf.nodes for c in (n.children or [])}
         roots = [i for i in range(len(gltf.nodes)) if i not in children]
     verts, faces, offset = [], [], 0
-    stack = [(n, np.eye(4)) for n in reversed(roots)]
+    stack, seen = [(n, np.eye(4)) for n in reversed(roots)], set()
     while stack:
         index, parent = stack.pop()
+        if index in seen:
+            raise RetargetError(f"{path}: node {index} is reached twice (the node hierarchy has a cycle)")
+        seen.add(index)
         node = gltf.nodes[index]
         world = parent @ _node_matrix(node)
         stack.extend((c, world) for c in reversed(node.children or []))
@@ -381,12 +570,13 @@ def _natural_key(path: Path):
 
 
 def sequence_files(spec) -> list[Path]:
-    """The mesh files of a sequence given as a folder (its mesh files), a glob pattern or one file,
-    sorted naturally. RetargetError if nothing matches."""
+    """The mesh files of a sequence given as a folder (its mesh files), a glob pattern or one file
+    (a name that exists, ``a[1].obj`` included, is a file, never a pattern), sorted naturally.
+    RetargetError if nothing matches."""
     spec = str(spec)
     if os.path.isdir(spec):
         files = [p for p in Path(spec).iterdir() if p.is_file() and p.suffix.lower() in READ_FORMATS]
-    elif globmod.has_magic(spec):
+    elif globmod.has_magic(spec) and not os.path.lexists(spec):  # an existing name is taken literally
         files = [Path(p) for p in globmod.glob(spec) if os.path.isfile(p)]
     else:
         files = [Path(spec)]

@@ -20,6 +20,9 @@ from nets.geometry import vertex_normals  # noqa: F401  (one implementation, re-
 
 from .errors import RetargetError
 
+MAX_COORDINATE = 1e15       # any unit: 1e15 nm is 1000 km
+COLLINEAR_TOLERANCE = 1e-5  # relative spread across the line under which a mesh is a line
+
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Triangle areas: vertices (V,3), faces (F,3) -> (F,) float64 in squared input units."""
@@ -140,8 +143,11 @@ def check_mesh(mesh: Mesh, path=None) -> Mesh:
     """Validate a mesh for the pipeline; return it unchanged or raise RetargetError.
 
     Refused, each with one line naming ``path`` (default ``mesh.name``): no vertices, non-finite
-    coordinates, no faces (a point cloud), face indices out of range, every face degenerate
-    (zero area relative to the mesh size). Individual degenerate faces are allowed.
+    coordinates or coordinates beyond ``MAX_COORDINATE`` (their squares would overflow), no faces
+    (a point cloud), face indices out of range, every face degenerate (zero area relative to the mesh
+    size), or all vertices on one line up to rounding (the second principal spread of the used
+    vertices below ``COLLINEAR_TOLERANCE`` times the first: a relative test, which file rounding
+    noise does not pass). Individual degenerate faces are allowed.
     """
     where = str(path if path is not None else (mesh.name or "mesh"))
     v, f = mesh.vertices, mesh.faces
@@ -152,6 +158,10 @@ def check_mesh(mesh: Mesh, path=None) -> Mesh:
         raise RetargetError(
             f"{where}: {int(bad.sum())} vertices have NaN/inf coordinates (first: vertex {int(np.argmax(bad))})"
         )
+    huge = (np.abs(v) > MAX_COORDINATE).any(axis=1)
+    if huge.any():
+        raise RetargetError(f"{where}: {int(huge.sum())} vertices have coordinates beyond ±{MAX_COORDINATE:g} "
+                            f"(first: vertex {int(np.argmax(huge))}); check the file's units")
     if len(f) == 0:
         raise RetargetError(f"{where}: is a point cloud (no faces); a triangle mesh is needed")
     if f.min() < 0 or f.max() >= len(v):
@@ -162,4 +172,11 @@ def check_mesh(mesh: Mesh, path=None) -> Mesh:
     diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
     if not (face_areas(v, f) > 1e-12 * diag * diag).any():
         raise RetargetError(f"{where}: all {len(f)} faces are degenerate (zero area)")
+    mask = np.zeros(len(v), bool)
+    mask[f.ravel()] = True
+    used = v[mask]
+    spread = np.linalg.eigvalsh(np.cov(used - used.mean(axis=0), rowvar=False))  # ascending, σ²
+    if spread[1] <= (COLLINEAR_TOLERANCE ** 2) * spread[2]:
+        raise RetargetError(f"{where}: all {len(f)} faces are degenerate (the vertices lie on a line, "
+                            "up to rounding)")
     return mesh

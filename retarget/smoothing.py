@@ -10,6 +10,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from .errors import RetargetError
+from .io import check_fps
 
 FILTERS = ("one_euro", "savgol")
 
@@ -48,7 +49,8 @@ def savgol(x: np.ndarray, window: int = 9, order: int = 2) -> np.ndarray:
 
 def smooth_codes(z: np.ndarray, method: str, fps: float = 30.0) -> np.ndarray:
     """Filter codes (T, D) over time with ``method`` in FILTERS -> (T, D) float64; RetargetError for
-    another method."""
+    another method, or an fps that is not a finite number above 0."""
+    fps = check_fps(fps)
     if method == "one_euro":
         return one_euro(z, fps)
     if method == "savgol":

@@ -81,7 +81,59 @@ def load_config(path, _seen=()) -> dict:
         raw["model"] = {**defaults["model"], **raw["model"]}
     cfg = merge(defaults, raw, str(path), replace=("model",))
     model_cfg(cfg, str(path))  # validates the model section
+    check_values(cfg, str(path))
     return cfg
+
+
+#: (section, key) -> (kind, lowest, highest, lowest allowed?): the numbers of a training config.
+VALUE_RULES = {
+    ("train", "steps"): (int, 1, None, True), ("train", "seed"): (int, 0, None, True),
+    ("train", "log_every"): (int, 1, None, True), ("train", "val_every"): (int, 1, None, True),
+    ("train", "max_minutes"): (float, 0.0, None, True), ("train", "ckpt_minutes"): (float, 0.0, None, True),
+    ("optim", "lr"): (float, 0.0, None, False), ("optim", "weight_decay"): (float, 0.0, None, True),
+    ("optim", "warmup_steps"): (int, 0, None, True), ("optim", "grad_clip"): (float, 0.0, None, False),
+    ("data", "n_identities"): (int, 1, None, True), ("data", "pool_size"): (int, 1, None, True),
+    ("data", "pool_refresh"): (int, 1, None, True), ("data", "sources_per_target"): (int, 1, None, True),
+    ("data", "decode_faces"): (int, 0, None, True), ("data", "rig_mix"): (float, 0.0, 1.0, True),
+    ("data", "val_identities"): (int, 1, None, True), ("data", "val_expressions"): (int, 1, None, True),
+    **{("loss", k): (float, 0.0, None, True) for k in DEFAULTS["loss"]},
+}
+
+
+def check_values(cfg: dict, where: str = "config") -> None:
+    """RetargetError naming ``where`` and the key for a number of the config (:data:`VALUE_RULES`)
+    of the wrong type, not finite or out of range: 0 or negative steps, a negative learning rate..."""
+    for (section, key), (kind, lo, hi, lo_ok) in VALUE_RULES.items():
+        value = cfg[section][key]
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        ok = (number and (kind is float or isinstance(value, int)) and math.isfinite(value)
+              and (value >= lo if lo_ok else value > lo) and (hi is None or value <= hi))
+        if not ok:
+            span = f"{'>=' if lo_ok else '>'} {lo}" + (f" and <= {hi}" if hi is not None else "")
+            raise RetargetError(f"{where}: {section}.{key} must be {'an integer' if kind is int else 'a number'} "
+                                f"{span}, got {str(value)[:40]!r}")
+
+
+#: The files of a run folder; another run's are never overwritten without --resume.
+RUN_FILES = ("last.pt", "model.pt", "train_log.csv")
+
+
+def check_run_folder(out, resume: bool) -> None:
+    """RetargetError naming the file unless ``out`` can take this run: it must be a folder (or not
+    exist yet), and hold no file of another run (:data:`RUN_FILES`) unless ``resume``, which then
+    needs that run's ``last.pt``."""
+    out = Path(out)
+    if str(out) == "-":
+        raise RetargetError("-: a training run is written to a folder; give --out FOLDER")
+    if out.exists() and not out.is_dir():
+        raise RetargetError(f"{out}: exists and is not a folder (--out is the run folder)")
+    held = [out / name for name in RUN_FILES if (out / name).exists()]
+    if held and not resume:
+        raise RetargetError(f"{held[0]}: another run's output is in {out}; pass --resume to continue "
+                            "that run or choose another --out")
+    if held and resume and not (out / "last.pt").is_file():
+        raise RetargetError(f"{held[0]}: another run's output, without the last.pt that --resume "
+                            "continues from; choose another --out")
 
 
 def model_cfg(cfg: dict, where: str = "config") -> NFSConfig:
@@ -266,6 +318,7 @@ class Trainer:
 
     def __init__(self, cfg: dict, out_dir, config_path: str = "", init=None, progress=True):
         self.cfg, self.out = cfg, Path(out_dir)
+        check_values(cfg, config_path or "config")
         self.device = pick_device()
         self.rank, self.world = init_distributed(self.device)
         self.model_cfg = model_cfg(cfg)
@@ -303,8 +356,18 @@ class Trainer:
         if not path.exists():
             return False
         state = load_checkpoint(path)
-        self.model.load_state_dict(model_from_checkpoint(state, path).state_dict())
-        self.opt.load_state_dict(state["optimizer"])
+        saved = model_from_checkpoint(state, path)
+        if saved.cfg != self.model_cfg:
+            raise RetargetError(f"{path}: the run's model differs from the config's (model: "
+                                f"{self.cfg['model']}); resume with the run's own config")
+        self.model.load_state_dict(saved.state_dict())
+        try:
+            self.opt.load_state_dict(state["optimizer"])
+        except (KeyError, ValueError, TypeError, RuntimeError) as e:
+            raise RetargetError(f"{path}: the optimizer state does not match the model "
+                                f"({str(e).splitlines()[0][:200]})") from None
+        if not isinstance(state.get("torch_rng"), torch.Tensor) or state["torch_rng"].dtype != torch.uint8:
+            raise RetargetError(f"{path}: the checkpoint's torch_rng is not a random-generator state")
         self.step, self.elapsed = int(state["step"]), float(state["elapsed_s"])
         torch.set_rng_state(state["torch_rng"])
         return True

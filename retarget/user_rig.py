@@ -34,7 +34,7 @@ import numpy as np
 from data_synth.facs import ARKIT_NAMES, FACS_INDEX, N_FACS, arkit_to_ict
 
 from .errors import RetargetError
-from .io import load_mesh
+from .io import load_mesh, regular_file
 
 #: Width of the left/right cross-over when an ARKit shape is split into its two ICT halves, as a
 #: fraction of the neutral's x extent (0.05 of a 16 cm head: 8 mm).
@@ -93,10 +93,9 @@ def load_user_rig(path, keep_vertices=None, strict: bool = False) -> UserRig:
     path = Path(path)
     if path.is_dir():
         neutral, faces, named, identity, segments = _read_folder(path, strict)
-    elif path.is_file():
-        neutral, faces, named, identity, segments = _read_npz(path, strict)
     else:
-        raise RetargetError(f"{path}: no such rig (expected an .npz or a folder of OBJs)")
+        regular_file(path, "rig file", missing="no such rig (expected an .npz or a folder of OBJs)")
+        neutral, faces, named, identity, segments = _read_npz(path, strict)
     deltas, present = ict_deltas(named, neutral, path)
     rig = UserRig(neutral.astype(np.float32), faces.astype(np.int64), deltas, present, segments,
                   identity, str(path))

@@ -43,7 +43,7 @@ def refused(capsys, argv, names, fragment, good, out_dir, bundled: bool = False)
     """Run the CLI in-process (with the tiny checkpoint unless ``--checkpoint`` is in argv or
     ``bundled``); assert exit 2, exactly one error line (the last) naming every name in ``names``
     with ``fragment``, no traceback, inputs unchanged and nothing written under out_dir."""
-    argv = [str(a) for a in argv] + ["--device", "cpu"]
+    argv = [str(a) for a in argv] + (["--device", "cpu"] if argv[0] not in ("train", "synth") else [])
     if "--checkpoint" not in argv and not bundled:
         argv += ["--checkpoint", str(good / "tiny.pt")]
     before = _tree(BAD, good)
@@ -54,6 +54,8 @@ def refused(capsys, argv, names, fragment, good, out_dir, bundled: bool = False)
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]
     errors = [ln for ln in lines if ln.startswith("error: ")]
     assert len(errors) == 1 and lines[-1] == errors[0] and "Traceback" not in err, err
+    assert all(ln.startswith("warning: ") for ln in lines[:-1]), err  # no Python warnings
+    assert len(errors[0]) <= 1000, errors[0][:200]
     for name in names:
         assert str(name) in errors[0], errors[0]
     assert fragment in errors[0], errors[0]
@@ -101,7 +103,7 @@ def test_output_that_is_an_input(capsys, good, tmp_path):
     os.link(tgt, tmp_path / "hardlink.obj")  # another name of the same file
     refused(capsys, ["animate", tgt, "--weights", w, "-o", tmp_path / "hardlink.obj"],
             ["hardlink.obj"], "refusing to overwrite the input", good, tmp_path)
-    refused(capsys, ["invert", src, "-o", src], [src], "refusing to overwrite the input", good, tmp_path)
+    refused(capsys, ["invert", src, "-o", src], [src], "written as .csv, not .obj", good, tmp_path)
     refused(capsys, ["export-rig", tgt, "-o", tmp_path / "rig.obj"], ["rig.obj"], "written as .glb",
             good, tmp_path)
     refused(capsys, ["animate", tgt, "--weights", w, "-o", tmp_path / "o.csv"], ["o.csv"],
@@ -191,7 +193,7 @@ def test_bad_checkpoints(capsys, good, tmp_path, monkeypatch):
     state["train_config"] = {"evil": Path("x")}  # a pickled object: refused by weights_only
     torch.save(state, tmp_path / "tampered.pt")
     (tmp_path / "garbage.pt").write_bytes(b"not a checkpoint at all")
-    cases = {"other_config.pt": "checkpoint does not match", "tampered.pt": "not a loadable checkpoint",
+    cases = {"other_config.pt": "checkpoint does not match", "tampered.pt": "holds pickled code",
              "garbage.pt": "not a loadable checkpoint", "missing.pt": "checkpoint not found"}
     for name, fragment in cases.items():
         refused(capsys, base + ["--checkpoint", tmp_path / name], [tmp_path / name], fragment, good,
@@ -201,3 +203,236 @@ def test_bad_checkpoints(capsys, good, tmp_path, monkeypatch):
     msg = refused(capsys, base, [], "no bundled checkpoint at", good, tmp_path, bundled=True)
     assert "retarget train" in msg and "--checkpoint" in msg and "default.pt" in msg
 
+
+
+# ------------------------------------------------------------------------------- hostile inputs
+@pytest.fixture
+def no_hang():
+    """Fail (instead of blocking the suite forever) if a command waits on a FIFO or device."""
+    import signal
+
+    def hung(signum, frame):
+        raise AssertionError("the command blocked (read a FIFO or device?)")
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(60)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, previous)
+
+
+def test_special_files_are_refused(capsys, good, tmp_path, no_hang):
+    """FIFOs, devices and symlink loops given as a mesh, weights or checkpoint: named, never read."""
+    d = tmp_path / "special"
+    d.mkdir()
+    for name in ("pipe.obj", "pipe.csv", "pipe.pt"):
+        os.mkfifo(d / name)
+    os.symlink("/dev/zero", d / "zero.obj")
+    os.symlink("/dev/zero", d / "zero.json")
+    os.symlink("loop_b.obj", d / "loop_a.obj")
+    os.symlink("loop_a.obj", d / "loop_b.obj")
+    os.symlink("loop_d.csv", d / "loop_c.csv")
+    os.symlink("loop_c.csv", d / "loop_d.csv")
+    out = tmp_path / "out"
+    out.mkdir()
+    w, tgt = good / "w.csv", good / "target.obj"
+    cases = [(["animate", d / "pipe.obj", "--weights", w], d / "pipe.obj", "is a named pipe (FIFO)"),
+             (["animate", tgt, "--weights", d / "pipe.csv"], d / "pipe.csv", "is a named pipe (FIFO)"),
+             (["animate", tgt, "--weights", w, "--checkpoint", d / "pipe.pt"], d / "pipe.pt",
+              "is a named pipe (FIFO)"),
+             (["animate", d / "zero.obj", "--weights", w], d / "zero.obj", "is a device"),
+             (["animate", tgt, "--weights", d / "zero.json"], d / "zero.json", "is a device"),
+             (["animate", d / "loop_a.obj", "--weights", w], d / "loop_a.obj", "is a symlink loop"),
+             (["animate", tgt, "--weights", d / "loop_c.csv"], d / "loop_c.csv", "is a symlink loop")]
+    for argv, name, fragment in cases:
+        refused(capsys, argv + ["-o", out / "o.obj"], [name], fragment, good, out)
+    refused(capsys, ["transfer", good / "source.obj", tgt, "-o", d / "loop_a.obj"], [d / "loop_a.obj"],
+            "is a symlink loop", good, out)
+
+
+def test_glb_buffer_through_a_link_or_fifo(capsys, good, tmp_path, no_hang):
+    """A .gltf whose relative buffer URI is a FIFO in its folder, or a link to a device or to a file
+    outside its folder."""
+    gltf = (BAD / "buffer_device.gltf").read_text()
+    d = tmp_path / "scene"
+    d.mkdir()
+    os.mkfifo(d / "pipe.bin")
+    os.symlink("/dev/zero", d / "zero.bin")
+    (tmp_path / "secret.bin").write_bytes(b"\0" * 64)
+    os.symlink(tmp_path / "secret.bin", d / "elsewhere.bin")
+    for name in ("pipe", "zero", "elsewhere"):
+        (d / f"{name}.gltf").write_text(gltf.replace("/dev/zero", f"{name}.bin"))
+    out = tmp_path / "out"
+    out.mkdir()
+    for name, fragment in (("pipe.gltf", "is a named pipe (FIFO)"),
+                           ("zero.gltf", "points outside the glTF's folder"),
+                           ("elsewhere.gltf", "points outside the glTF's folder")):
+        refused(capsys, ["animate", d / name, "--weights", good / "w.csv", "-o", out / "o.obj"],
+                [d / name, "buffer 0"], fragment, good, out)
+
+
+def test_an_existing_name_with_glob_characters_is_taken_literally(good, tmp_path):
+    from retarget.io import sequence_files
+
+    shutil_copy = (good / "source.obj").read_bytes()
+    (tmp_path / "a[1].obj").write_bytes(shutil_copy)
+    (tmp_path / "a1.obj").write_bytes(shutil_copy)
+    assert sequence_files(tmp_path / "a[1].obj") == [tmp_path / "a[1].obj"]
+    assert sequence_files(f"{tmp_path}/a[12].obj") == [tmp_path / "a1.obj"]  # not a file: a pattern
+
+
+def test_outputs_that_are_not_files_of_the_command(capsys, good, tmp_path, monkeypatch):
+    """``-o -`` (no folder named - is made) and extensions that are not the command's."""
+    monkeypatch.chdir(tmp_path)
+    src, tgt, w = good / "source.obj", good / "target.obj", good / "w.csv"
+    for argv in (["transfer", src, tgt], ["animate", tgt, "--weights", w], ["invert", src]):
+        refused(capsys, argv + ["-o", "-"], [], "standard output is not supported", good, tmp_path)
+    refused(capsys, ["export-rig", tgt, "-o", "-"], [], "-: the rig is written as .glb", good, tmp_path)
+    refused(capsys, ["invert", src, "-o", tmp_path / "x.obj"], ["x.obj"], "written as .csv, not .obj",
+            good, tmp_path)
+    refused(capsys, ["invert", src, "-o", tmp_path / "w"], [tmp_path / "w"], "written as .csv",
+            good, tmp_path)
+    refused(capsys, ["train", "--config", "tiny", "--out", "-"], [], "written to a folder", good,
+            tmp_path, bundled=True)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_take_is_never_mixed_with_older_frames(capsys, good, tmp_path):
+    take = tmp_path / "take"
+    take.mkdir()
+    for t in range(5):
+        (take / f"frame_{t:04d}.obj").write_text("older take")
+    (tmp_path / "w2.csv").write_text("jawOpen\n0.5\n0.2\n")
+    refused(capsys, ["animate", good / "target.obj", "--weights", tmp_path / "w2.csv", "-o", take],
+            [take / "frame_0000.obj"], "holds frames already (5 frame files)", good, tmp_path)
+
+
+@pytest.mark.parametrize("fps", ["0", "-30", "nan", "inf", "abc"])
+def test_frame_rates_must_be_positive(capsys, good, tmp_path, fps):
+    src, tgt = good / "source.obj", good / "target.obj"
+    for argv in (["transfer", src, tgt, "-o", tmp_path / "o.obj"],
+                 ["invert", src, "-o", tmp_path / "w.csv", "--smooth", "one_euro"],
+                 ["invert", src, "-o", tmp_path / "w.csv"]):
+        refused(capsys, argv + [f"--fps={fps}"], [f"--fps {fps}"], "frame rate must be a finite number "
+                "above 0", good, tmp_path)
+
+
+def test_training_numbers_and_run_folders(capsys, good, tmp_path):
+    """Steps, learning rate, config values; --out over another run's files without --resume."""
+    out = tmp_path / "run"
+    base = ["train", "--config", "tiny", "--out", out, "--no-progress"]
+    for extra, fragment in ((["--steps", "-3"], "--steps -3: must be at least 1"),
+                            (["--steps", "0"], "--steps 0: must be at least 1"),
+                            (["--steps", "abc"], "argument --steps: invalid int value: 'abc'"),
+                            (["--lr=-1e-3"], "--lr must be > 0"),
+                            (["--lr", "nan"], "--lr must be > 0"),
+                            (["--max-minutes", "nan"], "--max-minutes must be >= 0")):
+        refused(capsys, base + extra, [], fragment, good, tmp_path, bundled=True)
+    for text, fragment in (("train: {steps: abc}", "train.steps must be an integer >= 1, got 'abc'"),
+                           ("train: {steps: 0}", "train.steps must be an integer >= 1, got '0'"),
+                           ("optim: {lr: -0.001}", "optim.lr must be a number > 0.0"),
+                           ("data: {rig_mix: 2}", "data.rig_mix must be a number >= 0.0 and <= 1.0")):
+        cfg = tmp_path / "bad.yaml"
+        cfg.write_text(f"base: {Path(__file__).parents[1] / 'configs/train/tiny.yaml'}\n{text}\n")
+        refused(capsys, ["train", "--config", cfg, "--out", out], [cfg], fragment, good, tmp_path,
+                bundled=True)
+        cfg.unlink()
+    out.mkdir()
+    for name in ("model.pt", "train_log.csv"):  # another run's outputs, without its last.pt
+        (out / name).write_text("another run")
+        refused(capsys, base, [out / name], "another run's output is in", good, tmp_path, bundled=True)
+        refused(capsys, base + ["--resume"], [out / name], "without the last.pt", good, tmp_path,
+                bundled=True)
+        (out / name).unlink()
+    (tmp_path / "file").write_text("x")
+    refused(capsys, ["train", "--config", "tiny", "--out", tmp_path / "file"], [tmp_path / "file"],
+            "exists and is not a folder", good, tmp_path, bundled=True)
+
+
+def test_checkpoint_configs_are_not_trusted(capsys, good, tmp_path, no_hang):
+    """Absurd or wrongly typed config values and fields: refused on load, quickly, in one line."""
+    state = torch.load(good / "tiny.pt", weights_only=True)
+    cases = {"huge_k_eig": ({"model_config": {**state["model_config"], "k_eig": 10**9}},
+                            "NFSConfig.k_eig: expected a int in 1..512, got '1000000000'"),
+             "string_config": ({"model_config": "tiny"}, "model_config is a str, not a mapping"),
+             "float_width": ({"model_config": {**state["model_config"], "enc_width": 16.5}},
+                             "NFSConfig.enc_width: expected a int"),
+             "wide_claim": ({"model_config": {**state["model_config"], "decoder_width": 2048}},
+                            "checkpoint does not match this version's model"),
+             "channels": ({"model_config": {**state["model_config"], "image_channels": 3}},
+                          "image_channels 3"),
+             "string_step": ({"step": "many"}, "step 'many' is not an integer >= 0"),
+             "weights_list": ({"model": [1, 2, 3]}, "model is not a mapping of names to tensors")}
+    out = tmp_path / "out"
+    out.mkdir()
+    for name, (change, fragment) in cases.items():
+        torch.save({**state, **change}, tmp_path / f"{name}.pt")
+        refused(capsys, ["animate", good / "target.obj", "--weights", good / "w.csv", "-o", out / "o.obj",
+                         "--checkpoint", tmp_path / f"{name}.pt"], [tmp_path / f"{name}.pt"], fragment,
+                good, out)
+
+
+def test_python_warnings_never_precede_the_error(capsys, good, tmp_path, monkeypatch):
+    """A numpy/torch warning raised before a user error is not printed; after a command that
+    succeeds it is, as one ``warning:`` line; the project's own warnings print at once."""
+    import warnings
+
+    from retarget.commands import invert
+    from retarget.errors import RetargetError, RetargetWarning
+
+    def failing(args):
+        warnings.warn("overflow encountered in cast", RuntimeWarning)
+        raise RetargetError(f"{args.frames}: refused")
+    monkeypatch.setattr(invert, "run", failing)
+    msg = refused(capsys, ["invert", good / "source.obj", "-o", tmp_path / "w.csv"], [good / "source.obj"],
+                  "refused", good, tmp_path)
+    assert "overflow" not in capsys.readouterr().err + msg
+
+    def working(args):
+        warnings.warn("overflow encountered in cast", RuntimeWarning)
+        warnings.warn("two heads?", RetargetWarning)
+        print("done")
+        return 0
+    monkeypatch.setattr(invert, "run", working)
+    assert main(["invert", str(good / "source.obj"), "-o", str(tmp_path / "w.csv")]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["warning: two heads?", "warning: overflow encountered in cast"]
+
+
+def test_a_huge_take_is_refused_before_any_work(capsys, good, tmp_path, monkeypatch):
+    """100,000 frames of weights: the size of the take is estimated first (a sequence GLB is
+    built in memory whole; frame files must fit on the disk)."""
+    import shutil
+    from collections import namedtuple
+
+    from retarget import api as api_module
+
+    big = tmp_path / "in" / "long.csv"
+    big.parent.mkdir()
+    big.write_text("jawOpen\n" + "0.5\n" * 100_000)
+    out = tmp_path / "out"
+    out.mkdir()
+    monkeypatch.setattr(api_module.Retargeter, "prepare", lambda *a: pytest.fail("work was started"))
+    msg = refused(capsys, ["animate", good / "target.obj", "--weights", big, "-o", out / "take.glb"],
+                  [out / "take.glb"], "100,000 frame(s) of 162 vertices as one GLB would need about",
+                  good, out)
+    assert "export-rig --weights" in msg and "--force" in msg
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 10**6, 10**6))
+    refused(capsys, ["animate", good / "target.obj", "--weights", big, "-o", out / "frames"],
+            [out / "frames"], "GB free", good, out)
+
+
+def test_other_commands_refuse_special_names(capsys, good, tmp_path, monkeypatch, no_hang):
+    """demo / synth with ``-o -``; a FIFO given as a training config or a rig."""
+    monkeypatch.chdir(tmp_path)
+    refused(capsys, ["demo", "-o", "-"], [], "standard output is not supported", good, tmp_path)
+    refused(capsys, ["synth", "--preview", "--out", "-"], [], "standard output is not supported", good,
+            tmp_path, bundled=True)
+    os.mkfifo(tmp_path / "cfg.yaml")
+    os.mkfifo(tmp_path / "rig.npz")
+    refused(capsys, ["train", "--config", tmp_path / "cfg.yaml", "--out", tmp_path / "run"],
+            [tmp_path / "cfg.yaml"], "is a named pipe (FIFO)", good, tmp_path, bundled=True)
+    refused(capsys, ["train", "--rig", tmp_path / "rig.npz", "--init", good / "tiny.pt", "--steps", "1",
+                     "--out", tmp_path / "run"], [tmp_path / "rig.npz"], "is a named pipe (FIFO)", good,
+            tmp_path, bundled=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.yaml", "rig.npz"]

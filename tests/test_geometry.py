@@ -195,3 +195,40 @@ def test_eigensolver_retries_with_larger_shift_then_names_the_mesh(monkeypatch):
     monkeypatch.setattr(geometry.scipy.sparse.linalg, "eigsh", broken)
     with pytest.raises(ValueError, match="head_scan.obj"):
         compute_operators(sphere.vertices, sphere.faces, k=4, name="head_scan.obj")
+
+
+def test_disk_cache_off_switch_size_limit_and_unwritable_folder(tmp_path, monkeypatch):
+    """RETARGET_NO_CACHE: nothing written; RETARGET_CACHE_MAX_MB: least recently used entries go
+    first, stale temporary files too; a folder that cannot be written: a CacheWarning, no cache."""
+    import os
+    import time
+
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    v = sphere.vertices
+    geometry.clear_memory_cache()
+    monkeypatch.setenv("RETARGET_NO_CACHE", "1")
+    load_or_compute_operators(v, sphere.faces, k=8, cache_dir=tmp_path / "off")
+    assert not (tmp_path / "off").exists()
+    monkeypatch.delenv("RETARGET_NO_CACHE")
+
+    cache = tmp_path / "cache"
+    geometry.clear_memory_cache()
+    load_or_compute_operators(v, sphere.faces, k=8, cache_dir=cache)
+    (entry,) = cache.glob("*.npz")
+    stale = cache / "left.by.a.killed.writer.tmp"
+    stale.write_bytes(b"x")
+    os.utime(stale, (time.time() - 2 * geometry.STALE_TMP_SECONDS,) * 2)
+    os.utime(entry, (time.time() - 100,) * 2)
+    monkeypatch.setenv("RETARGET_CACHE_MAX_MB", str(1.5 * entry.stat().st_size / 2**20))  # room for one
+    load_or_compute_operators(v * 2, sphere.faces, k=8, cache_dir=cache)
+    assert [p for p in cache.iterdir()] == [next(cache.glob("*.npz"))] and not entry.exists()
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    geometry.clear_memory_cache()
+    with pytest.warns(geometry.CacheWarning, match="cannot be written.*going on without it"):
+        ops = load_or_compute_operators(v, sphere.faces, k=8, cache_dir=blocker / "cache")
+    assert ops.evecs.shape == (len(v), 8) and blocker.read_text() == "not a folder"
+    monkeypatch.setenv("RETARGET_CACHE_MAX_MB", "lots")
+    with pytest.warns(geometry.CacheWarning, match="RETARGET_CACHE_MAX_MB"):
+        assert geometry.disk_cache_max_bytes() == geometry.DISK_CACHE_MAX_MB * 2**20

@@ -214,6 +214,17 @@ MESH_CASES = {
     "unknown_format.stl": "unknown mesh format",
     "does_not_exist.obj": "no such file",
     "seq_counts": "is a folder",
+    "face_index_zero.obj": "line 4: face index 0 (OBJ vertex indices start at 1)",
+    "collinear.obj": "the vertices lie on a line",
+    "huge_coordinate.obj": "coordinates beyond",
+    "buffer_absolute.gltf": "is not a relative path",
+    "buffer_device.gltf": "is not a relative path",
+    "buffer_file_scheme.gltf": "is not a relative path",
+    "buffer_escapes.gltf": "points outside the glTF's folder",
+    "buffer_escapes_encoded.gltf": "points outside the glTF's folder",
+    "draco.gltf": "requires the glTF extension(s) KHR_draco_mesh_compression",
+    "meshopt.gltf": "requires the glTF extension(s) EXT_meshopt_compression",
+    "node_cycle.gltf": "the node hierarchy has a cycle",
 }
 
 
@@ -299,3 +310,70 @@ def test_obj_objects_groups_materials_and_relative_indices(tmp_path):
     latin = tmp_path / "latin.obj"
     latin.write_bytes(b"# cr\xe9\xe9 par un vieil exporteur\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     assert load_mesh(latin).n_vertices == 3
+
+
+# ------------------------------------------------------------------------------- hostile inputs
+def test_byte_order_marks_and_utf16_text(tmp_path):
+    """A UTF-8 BOM does not hide the first line; UTF-16 text (with or without a BOM) is text."""
+    from retarget.weights_io import read_weights
+
+    obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+    for name, data in (("bom.obj", b"\xef\xbb\xbf" + obj.encode()), ("utf16.obj", obj.encode("utf-16")),
+                       ("utf16le.obj", obj.encode("utf-16-le"))):
+        (tmp_path / name).write_bytes(data)
+        m = load_mesh(tmp_path / name)
+        assert np.array_equal(m.vertices[0], [0, 0, 0]) and m.n_vertices == 3, name
+    (tmp_path / "w.csv").write_bytes("jawOpen,eyeBlink_L\n0.25,0.5\n".encode("utf-16"))
+    from data_synth.facs import FACS_INDEX
+    w = read_weights(tmp_path / "w.csv").weights[0]
+    assert (w[FACS_INDEX["jawOpen"]], w[FACS_INDEX["eyeBlink_L"]]) == (0.25, 0.5)
+
+
+def test_two_heads_in_one_file_give_a_warning(tmp_path):
+    from retarget.io import SeveralHeadsWarning
+
+    from .test_api import head_mesh
+
+    head = head_mesh(2)
+    eye = trimesh.creation.icosphere(1).vertices * 1.2 + [3.0, 2.0, 9.0]
+    eyes = Mesh(np.concatenate([head.vertices, eye]),
+                np.concatenate([head.faces, trimesh.creation.icosphere(1).faces + head.n_vertices]))
+    save_mesh(tmp_path / "eyes.obj", eyes)
+    save_mesh(tmp_path / "two.obj", np.concatenate([head.vertices, head.vertices + [30.0, 0, 0]]),
+              np.concatenate([head.faces, head.faces + head.n_vertices]))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_mesh(tmp_path / "eyes.obj")  # a head and a small part: no warning
+    with pytest.warns(SeveralHeadsWarning, match=r"two\.obj: holds 2 disconnected parts.*162 and 162"):
+        load_mesh(tmp_path / "two.obj")
+
+
+def test_a_killed_writers_leftovers_are_removed_by_the_next_write(tmp_path):
+    """SIGKILL inside atomic_output and inside a frame folder's staging: the next write into the
+    same folder removes both; a temporary of a process that still runs is kept."""
+    import subprocess
+    import sys
+
+    code = ("import os, signal, sys; import numpy as np; from retarget.io import atomic_output; "
+            "from retarget.commands._common import write_frames\n"
+            "from argparse import Namespace\n"
+            "out = sys.argv[1]\n"
+            "def frames():\n    yield np.zeros((3, 3))\n    os.kill(os.getpid(), signal.SIGKILL)\n"
+            "if sys.argv[2] == 'file':\n"
+            "    with atomic_output(out) as tmp:\n        open(tmp, 'w').write('partial')\n"
+            "        os.kill(os.getpid(), signal.SIGKILL)\n"
+            "write_frames(out, frames(), np.array([[0, 1, 2]]), [], Namespace(up=None, forward=None, "
+            "format='obj'), n_frames=2)\n")
+    root = Path(__file__).parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    for target, mode in ((tmp_path / "o.obj", "file"), (tmp_path / "frames", "folder")):
+        proc = subprocess.run([sys.executable, "-c", code, str(target), mode], env=env, cwd=root)
+        assert proc.returncode == -9
+        left = [p.name for p in tmp_path.iterdir()]  # the previous run's leftover is gone
+        assert len(left) == 1 and left[0].startswith(f".{target.name}.pid") and ".tmp" in left[0], left
+    running = tmp_path / f".x.obj.pid{os.getpid()}.abcdefgh.tmp.obj"  # a write in progress
+    running.write_text("busy")
+    v, f = rng_mesh()
+    save_mesh(tmp_path / "next.obj", v, f)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["next.obj", running.name])

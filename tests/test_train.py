@@ -100,7 +100,7 @@ def test_tampered_checkpoint_is_refused(tmp_path):
             return (os.system, ("echo pwned",))
 
     torch.save({"format": "retarget-checkpoint/1", "x": Evil()}, bad)
-    with pytest.raises(RetargetError, match="evil.pt: not a loadable checkpoint"):
+    with pytest.raises(RetargetError, match="evil.pt: holds pickled code .* and was refused"):
         load_checkpoint(bad)
     garbage = tmp_path / "garbage.pt"
     garbage.write_bytes(b"not a checkpoint")

@@ -138,6 +138,16 @@ WEIGHT_CASES = {
     "null_value.json": "missing value",
     "missing.csv": "no such file",
     "seq_faces": "is a folder",
+    "only_commas.csv": "row 3 holds only commas",
+    "nul_bytes.csv": "holds binary data",
+    "wide.csv": "unknown blendshape names: extra0, extra1, extra2, extra3, extra4, extra5, extra6, "
+                "extra7, extra8, extra9 and 9,990 more (expected",
+    "huge_integer.json": "not usable JSON",
+    "big_integer.json": "not a finite number",
+    "huge_number.json": "far outside [0, 1]",
+    "deep.json": "nested too deeply",
+    "fps_zero.json": "frame rate must be a finite number above 0",
+    "fps_negative.json": "frame rate must be a finite number above 0",
 }
 
 

@@ -22,7 +22,6 @@ import numpy as np
 
 from ..facs import ARKIT_NAMES, FACS_INDEX, N_FACS, arkit_to_ict
 from . import assets
-from .identity import RACES
 from .transfer import deformation_transfer
 
 # MakeHuman expression unit -> ICT shape(s); a two-name entry is split by side (+x = _L)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -11,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import RetargetError
-from ..io import READ_FORMATS, WRITE_FORMATS, axis_rotation, check_output, save_mesh
+from ..io import (READ_FORMATS, WRITE_FORMATS, axis_rotation, check_fps, check_output,
+                  remove_stale_temporaries, save_mesh, temporary_prefix)
 from ..smoothing import FILTERS
 from ..usd import USD_FORMATS
 
@@ -27,7 +29,7 @@ def add_model_args(p) -> None:
 def add_smooth_arg(p) -> None:
     p.add_argument("--smooth", choices=FILTERS,
                    help="temporal filter of the codes of a sequence (streaming / offline)")
-    p.add_argument("--fps", type=float, default=30.0, help="frame rate of the sequence (default 30)")
+    p.add_argument("--fps", type=check_fps, default=30.0, help="frame rate of the sequence (default 30)")
 
 
 def retargeter(args):
@@ -41,15 +43,55 @@ def rotation(args) -> np.ndarray:
     return axis_rotation(args.up, args.forward)
 
 
-def output_paths(out: str, n_frames: int, inputs: list, fmt: str = "obj") -> list[Path]:
+#: Above this, a sequence GLB (held in memory whole while it is written) is refused unless --force.
+MAX_GLB_BYTES = 4 * 2**30
+_FRAME_FILE = re.compile(r"frame_\d+\.(obj|ply)", re.IGNORECASE)
+
+
+def output_bytes(ext: str, n_frames: int, n_vertices: int, n_faces: int) -> int:
+    """Rough size (bytes) of ``n_frames`` frames of a (V, F) mesh written as ``ext``: a sequence
+    GLB (12·T·V of morph targets, 4·T² of weights, built in memory whole), or T OBJ (about 40 bytes
+    a vertex, 20 a face) or PLY (12 and 13) files."""
+    if ext == ".glb":
+        return 12 * n_frames * n_vertices + 4 * n_frames ** 2 + 12 * n_vertices + 12 * n_faces
+    per_vertex, per_face = (12, 13) if ext == ".ply" else (40, 20)
+    return n_frames * (per_vertex * n_vertices + per_face * n_faces)
+
+
+def check_output_size(paths: list[Path], n: int, n_vertices: int, n_faces: int,
+                      force: bool = False) -> None:
+    """RetargetError, before any work, when ``n`` frames would not fit into ``paths``: a sequence
+    GLB above MAX_GLB_BYTES, or files larger than the free space of their disk (``force`` skips
+    this)."""
+    if force:
+        return
+    ext = paths[0].suffix.lower()
+    size = output_bytes(ext, n, n_vertices, n_faces)
+    what = f"{n:,} frame(s) of {n_vertices:,} vertices"
+    if ext == ".glb" and n > 1 and size > MAX_GLB_BYTES:
+        raise RetargetError(f"{paths[0]}: {what} as one GLB would need about {size / 1e9:.1f} GB "
+                            f"(the limit is {MAX_GLB_BYTES / 2**30:.0f} GiB); write a folder of frames, "
+                            "or export-rig --weights for a 53-shape rig (--force to try anyway)")
+    folder = next((p for p in paths[0].parents if p.is_dir()), Path("."))
+    free = shutil.disk_usage(folder).free
+    if size > free:
+        raise RetargetError(f"{paths[0]}: {what} would take about {size / 1e9:.1f} GB but {folder} "
+                            f"has {free / 1e9:.1f} GB free (--force to try anyway)")
+
+
+def output_paths(out: str, n_frames: int, inputs: list, fmt: str = "obj", n_vertices: int = 0,
+                 n_faces: int = 0, force: bool = False) -> list[Path]:
     """The files that OUT will receive for ``n_frames`` frames, checked before any work is done.
 
     OUT = a .obj/.ply file (one frame), a .glb (the frames as an animation) or a folder
-    (frame_0000.<fmt>, ...). RetargetError for an output that is an input, several frames into one
-    mesh file, an unwritable extension, or a file where a folder is meant.
+    (frame_0000.<fmt>, ...). RetargetError for ``-``, an output that is an input, several frames into
+    one mesh file, an unwritable extension, a file where a folder is meant, a folder that holds
+    frames already (a take is never mixed with an older one's), or (when the target's ``n_vertices``
+    and ``n_faces`` are given) an output too large (:func:`check_output_size`; ``force`` skips it).
     """
     out_path = Path(out)
     ext = out_path.suffix.lower()
+    check_output(out_path, inputs)  # "-", symlink loops, an input given as the output
     if ext == ".glb" or ext in WRITE_FORMATS:
         if ext != ".glb" and n_frames != 1:
             raise RetargetError(f"{out}: {n_frames} frames cannot go into one {ext} file; give a "
@@ -63,9 +105,16 @@ def output_paths(out: str, n_frames: int, inputs: list, fmt: str = "obj") -> lis
     elif out_path.exists() and not out_path.is_dir():
         raise RetargetError(f"{out}: exists and is not a folder")
     else:
+        older = sorted(p for p in out_path.iterdir() if _FRAME_FILE.fullmatch(p.name)) if out_path.is_dir() else []
+        if older:
+            raise RetargetError(f"{older[0]}: the folder {out} holds frames already ({len(older)} "
+                                "frame files); a take is written into a new or empty folder, never "
+                                "mixed with an older one")
         paths = [out_path / f"frame_{t:04d}.{fmt}" for t in range(n_frames)]
     for p in paths:
         check_output(p, inputs)
+    if n_vertices:
+        check_output_size(paths, n_frames, n_vertices, n_faces, force)
     return paths
 
 
@@ -95,7 +144,8 @@ def write_frames(out: str, frames, faces: np.ndarray, inputs: list, args, fps: f
     folder = Path(out)
     try:
         folder.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+        remove_stale_temporaries(folder.parent)  # a killed run's staging folder
+        staging = Path(tempfile.mkdtemp(prefix=temporary_prefix(folder), suffix=".tmp", dir=folder.parent))
     except OSError as e:
         raise RetargetError(f"{out}: cannot write the output folder ({e.strerror})") from None
     try:

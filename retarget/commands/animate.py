@@ -36,6 +36,8 @@ def run(args) -> int:
     if not usd:
         output_paths(args.out, len(track.weights), inputs, args.format)
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
+    output_paths(args.out, len(track.weights), inputs, args.format, target.n_vertices,
+                 len(target.faces), args.force)  # the size of the take, before any work
     r = retargeter(args)
     tgt = r.prepare(target)
     from ..api import weight_codes

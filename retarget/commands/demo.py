@@ -99,7 +99,7 @@ def run(args) -> int:
 
     from ..api import Retargeter
     from ..glb import write_rig_glb, write_sequence_glb
-    from ..io import save_mesh
+    from ..io import check_output, save_mesh
     from ..mesh import Mesh
     from ..metrics import mse_mm2, segment_mse_mm2, squared_errors_mm2
     from ..render import Renderer, contact_sheet, heatmap_colors, save_png
@@ -107,6 +107,7 @@ def run(args) -> int:
 
     t0 = time.monotonic()
     out = Path(args.out)
+    check_output(out, [])  # not "-" (standard output), not a symlink loop
     r = Retargeter.load(args.checkpoint, device=args.device)
     L = r.cfg.n_segments
     source_spec, target_spec = HEADS[args.heads]

@@ -18,18 +18,13 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from pathlib import Path
-
-    from ..errors import RetargetError
     from ..io import check_output, load_mesh, load_sequence, sequence_files
     from ..weights_io import write_weights_csv
 
     inputs = sequence_files(args.frames)
     if args.source_neutral:
         inputs.append(args.source_neutral)
-    check_output(args.out, inputs)
-    if Path(args.out).suffix.lower() != ".csv":
-        raise RetargetError(f"{args.out}: the weights are written as .csv")
+    check_output(args.out, inputs, formats=(".csv",))
     frames = load_sequence(args.frames, up=args.up, forward=args.forward, force=args.force)
     neutral = (load_mesh(args.source_neutral, up=args.up, forward=args.forward, force=args.force)
                if args.source_neutral else None)

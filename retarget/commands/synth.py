@@ -30,7 +30,10 @@ def add_arguments(p):
 def run(args) -> int:
     from ..errors import RetargetError
 
+    from ..io import check_output
+
     out = Path(args.out)
+    check_output(out, [])  # not "-" (standard output), not a symlink loop
     if out.exists() and not out.is_dir():
         raise RetargetError(f"{out}: exists and is not a folder")
     if args.preview:

@@ -33,7 +33,7 @@ def add_arguments(p):
                         "out with a one-line warning")
     p.add_argument("--rig-mix", type=float,
                    help="fraction of steps drawn from the rig, the rest procedural (default 0.5)")
-    p.add_argument("--steps", type=int, help="override train.steps")
+    p.add_argument("--steps", type=int, help="override train.steps (>= 1)")
     p.add_argument("--lr", type=float, help="override optim.lr (the peak learning rate)")
     p.add_argument("--max-minutes", type=float,
                    help="override train.max_minutes (0 = no time limit: the budget and the "
@@ -69,30 +69,31 @@ def training_config(args) -> tuple[dict, str]:
     if args.strict:
         cfg["data"]["rig_strict"] = True
     if args.rig_mix is not None:
+        if not 0 <= args.rig_mix <= 1:
+            raise RetargetError(f"--rig-mix {args.rig_mix}: must be between 0 and 1")
         cfg["data"]["rig_mix"] = args.rig_mix
     if args.steps is not None:
+        if args.steps < 1:
+            raise RetargetError(f"--steps {args.steps}: must be at least 1")
         cfg["train"]["steps"] = args.steps
     if args.lr is not None:
-        if not args.lr > 0:
+        if not 0 < args.lr < float("inf"):
             raise RetargetError(f"--lr must be > 0, got {args.lr}")
         cfg["optim"]["lr"] = args.lr
     if args.max_minutes is not None:
-        if args.max_minutes < 0:
+        if not args.max_minutes >= 0 or args.max_minutes == float("inf"):
             raise RetargetError(f"--max-minutes must be >= 0, got {args.max_minutes}")
         cfg["train"]["max_minutes"] = args.max_minutes
     return cfg, path
 
 
 def run(args) -> int:
-    from ..errors import RetargetError
-    from ..train import Trainer, shutdown_distributed
+    from ..train import Trainer, check_run_folder, shutdown_distributed
     from ..user_rig import UnknownShapeWarning
 
-    cfg, config_path = training_config(args)
     out = Path(args.out)
-    if (out / "last.pt").exists() and not args.resume:
-        raise RetargetError(f"{out}: already holds a run (last.pt); pass --resume to continue it "
-                            f"or choose another --out")
+    check_run_folder(out, args.resume)
+    cfg, config_path = training_config(args)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UnknownShapeWarning)
         trainer = Trainer(cfg, out, config_path=config_path, init=args.init,
