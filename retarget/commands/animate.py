@@ -36,8 +36,9 @@ def run(args) -> int:
     if not usd:
         output_paths(args.out, len(track.weights), inputs, args.format)
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
-    output_paths(args.out, len(track.weights), inputs, args.format, target.n_vertices,
-                 len(target.faces), args.force)  # the size of the take, before any work
+    if not usd:   # the size of the take, before any work
+        output_paths(args.out, len(track.weights), inputs, args.format, target.n_vertices,
+                     len(target.faces), args.force)
     r = retargeter(args)
     tgt = r.prepare(target)
     from ..api import weight_codes
