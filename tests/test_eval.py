@@ -177,6 +177,7 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     real = res["suites"]["real_rig"]["methods"]["full"]
     assert set(real["per_shape"]) == {"jawOpen", "eyeBlinkLeft"}
     assert real["sampled"]["invert"]["weight_mae"] >= 0
+    assert real["sampled"]["animate"]["mse_mm2"] > 0 and real["sampled"]["animate"]["do_nothing_mse_mm2"] > 0
     md = (out / "eval.md").read_text()
     for title in ("Self-retargeting", "Cross-identity", "Cross-topology", "Inverse rigging",
                   "Jitter", "Real ARKit rig", "Driving from FACS weights", "| full |",
@@ -199,6 +200,39 @@ def test_real_rig_self_retargeting_ground_truth_is_exact():
     # the procedural source receives the same FACS weights in ICT form
     w = cases["procedural_to_real"].source_weights[jaw]
     assert w[FACS_NAMES.index("jawOpen")] == 1.0 and w.sum() == 1.0
+
+
+class RealRigGroundTruth:
+    """A stand-in method that is exact on the real rig: it evaluates the rig with the ARKit weights
+    of the ICT weights it is given."""
+
+    name = "real gt"
+
+    def __init__(self, names):
+        self.m = arkit_ict_matrix(names)
+
+    def transfer(self, case, filters=(None,), fps=30.0):
+        return {f: case.gt for f in filters}
+
+    def invert(self, case):
+        return case.source_weights @ self.m
+
+    def animate(self, case, weights=None):
+        return case.target.evaluate(ict_to_arkit_weights(weights, self.m))
+
+
+def test_real_rig_animate_is_scored_against_the_rig_with_the_do_nothing_error():
+    if not REAL_RIG.exists():
+        pytest.skip("real rig not present")
+    cfg = tiny_config()
+    rig = RealRig.load(REAL_RIG)
+    res = Evaluation(cfg, [RealRigGroundTruth(rig.names)], progress=False).run(["real_rig"])
+    m = res["suites"]["real_rig"]["methods"]["real gt"]
+    for block in (m["sampled"]["animate"], m["per_shape"]["jawOpen"]):
+        key = "mse_mm2" if "mse_mm2" in block else "animate.mse_mm2"
+        nothing = block.get("do_nothing_mse_mm2", block.get("animate.do_nothing_mse_mm2"))
+        assert block[key] < 1e-8 and nothing > 0.01
+    assert "animate from true weights MSE (exact)" in to_markdown(res)
 
 
 def test_markdown_marks_missing_rows():
