@@ -323,7 +323,7 @@ class NFSModel(nn.Module):
             return codes
         self._check_image_code(c)
         bias = self._decoder_bias(c, codes.z_id)
-        parts = []
+        basis = feat.new_empty(feat.shape[0], self.cfg.code_dim, 3)   # filled in place: no 2x peak
         for rows in _chunks(feat.shape[0], chunk):
             z_skin = None if codes.z_skin is None else codes.z_skin[rows]
             m = self._basis_rows(feat[rows], z_skin, bias)                 # (n, code_dim, 3)
@@ -331,8 +331,7 @@ class NFSModel(nn.Module):
                 omega = (codes.omega_skin[rows] if codes.omega_skin is not None
                          else self.skinning_weights(z_skin))
                 m = m * omega[:, :, None]
-            parts.append(m)
-        basis = torch.cat(parts) if parts else feat.new_zeros(0, self.cfg.code_dim, 3)
+            basis[rows] = m
         return dataclasses.replace(codes, basis=basis)
 
     def local_code(self, codes: TargetCodes, z_ge: torch.Tensor,
