@@ -15,7 +15,7 @@ displacement Δv (V_tgt, 3) for every target vertex, in the canonical units of t
   a per-vertex MLP on the target alone, [v_tgt, γ(x_tgt), c_tgt, z_ID, z_Skin] -> M(x) ∈
   R^(code_dim x 3), and Δv = M(x)ᵀ z_LE: linear in z_GE, a blendshape rig of code_dim shapes per
   target (γ = Fourier features of the canonical position). M, with ω_Skin folded in, is computed
-  once per target (``TargetCodes.basis``), so each frame is one contraction.
+  once per target (``TargetCodes.basis``), so each frame is one matrix-vector product.
 
 Choices the paper leaves open (see ``NFSConfig``): one CNN shared by all encoders and the decoder
 (the paper gives each encoder its own CNN; sharing lets the target image be encoded once); the
@@ -212,9 +212,10 @@ class TargetCodes:
         omega_skin: (V, code_dim) skinning weights ω_Skin, cached for all the target's
             expressions; None without skinning, or to have ``local_code`` compute ω_Skin from
             z_skin chunk by chunk (no (V, code_dim) array kept, for huge meshes).
-        basis: (V, code_dim, 3) the basis decoder's rig B = ω_Skin ⊙ M(x) (M(x) without skinning),
-            so Δv = z_GEᵀ B per vertex, in the units of the features' positions; None for the MLP
-            decoder, or to have ``decode_target`` compute M chunk by chunk.
+        basis: (V, 3, code_dim) the basis decoder's rig Bᵀ, B = ω_Skin ⊙ M(x) (M(x) without
+            skinning), so Δv = Bᵀ z_GE per vertex (one (3V, code_dim) matrix-vector product per
+            frame), in the units of the features' positions; None for the MLP decoder, or to have
+            ``decode_target`` compute M chunk by chunk.
     """
 
     z_id: torch.Tensor
@@ -315,7 +316,7 @@ class NFSModel(nn.Module):
 
     def with_basis(self, feat: torch.Tensor, c: torch.Tensor, codes: TargetCodes,
                    chunk: int | None = None) -> TargetCodes:
-        """``codes`` with ``basis`` (V, code_dim, 3) = ω_Skin ⊙ M(x) filled in for the V vertices of
+        """``codes`` with ``basis`` (V, 3, code_dim) = (ω_Skin ⊙ M(x))ᵀ filled in for the V vertices of
         ``feat`` (V, 6) (``codes`` must describe the same vertices), computed ``chunk`` vertices at
         a time; ω_Skin is then no longer needed to decode and is dropped when ``codes`` had none
         cached. ``codes`` unchanged for the MLP decoder."""
@@ -323,7 +324,7 @@ class NFSModel(nn.Module):
             return codes
         self._check_image_code(c)
         bias = self._decoder_bias(c, codes.z_id)
-        basis = feat.new_empty(feat.shape[0], self.cfg.code_dim, 3)   # filled in place: no 2x peak
+        basis = feat.new_empty(feat.shape[0], 3, self.cfg.code_dim)   # filled in place: no 2x peak
         for rows in _chunks(feat.shape[0], chunk):
             z_skin = None if codes.z_skin is None else codes.z_skin[rows]
             m = self._basis_rows(feat[rows], z_skin, bias)                 # (n, code_dim, 3)
@@ -331,7 +332,7 @@ class NFSModel(nn.Module):
                 omega = (codes.omega_skin[rows] if codes.omega_skin is not None
                          else self.skinning_weights(z_skin))
                 m = m * omega[:, :, None]
-            basis[rows] = m
+            basis[rows] = m.transpose(1, 2)
         return dataclasses.replace(codes, basis=basis)
 
     def local_code(self, codes: TargetCodes, z_ge: torch.Tensor,
@@ -450,7 +451,7 @@ class NFSModel(nn.Module):
         ``feat`` (V, 6) and ``c`` are the target's, ``codes`` from ``encode_target``; rows (n,) int64
         selects the vertices to decode (None = all); ``chunk`` as in ``decode`` (z_LE is formed
         chunk by chunk too). Drive from FACS weights with ``z_ge = weights_to_code(w)``. With
-        ``codes.basis`` (the basis decoder) this is one contraction Δv = z_GEᵀ B per frame.
+        ``codes.basis`` (the basis decoder) this is one product (3n, code_dim) @ z_GE per frame.
         """
         if z_ge.dim() == 1:
             return self.decode_target(feat, c, codes, z_ge[None], rows, chunk)[0]
@@ -459,7 +460,8 @@ class NFSModel(nn.Module):
         for part in _chunks(n, chunk):
             idx = part if rows is None else rows[part]
             if codes.basis is not None:
-                out.append(torch.einsum("sd,mdc->smc", z_ge, codes.basis[idx]))
+                b = codes.basis[idx]                                               # (m, 3, d)
+                out.append((b.reshape(-1, b.shape[-1]) @ z_ge.T).T.reshape(len(z_ge), -1, 3))
                 continue
             z_skin = None if codes.z_skin is None else codes.z_skin[idx]
             out.append(self.decode_many(feat[idx], c, codes.z_id, self.local_code(codes, z_ge, idx),

@@ -251,9 +251,10 @@ class Retargeter:
         basis decoder it is the decoder's own rig, ``codes.basis`` (exact for FACS-weight codes)."""
         target = self.prepare(target)
         if target.codes.basis is not None:
-            deltas = target.codes.basis[:, :N_FACS].permute(1, 0, 2).cpu().numpy()    # (53, V, 3)
+            deltas = target.codes.basis[:, :, :N_FACS].permute(2, 0, 1).cpu().numpy()  # (53, V, 3)
+            deltas = target.proxy.canon.displacement_from_canonical(deltas)
             return BakedRig(target.mesh.vertices.astype(np.float32),
-                            target.proxy.canon.displacement_from_canonical(deltas).astype(np.float32))
+                            np.ascontiguousarray(deltas, dtype=np.float32))
         shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
         return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
 

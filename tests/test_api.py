@@ -223,11 +223,12 @@ def test_basis_decoder_bake_is_the_decoder(tmp_path, proxy_vertices):
                         cache_dir=tmp_path)
     mesh = head_mesh(3, scale=0.01, offset=(1.0, 0.0, 0.0))   # 642 vertices, in metres
     target = r.prepare(mesh)
-    assert target.codes.basis.shape == (642, 128, 3)
+    assert target.codes.basis.shape == (642, 3, 128)
     weights = np.random.default_rng(0).uniform(0, 1, (4, 53)).astype(np.float32)
     baked = r.bake(target)
     full = r.animate(target, weights)
     assert np.allclose(baked.neutral, mesh.vertices.astype(np.float32))
+    assert baked.deltas.shape == (53, 642, 3) and baked.deltas.flags["C_CONTIGUOUS"]  # fast playback
     mse_mm2 = ((baked.evaluate(weights) - full) * 1000) ** 2   # metres -> mm
     assert mse_mm2.sum(-1).mean() <= 1e-6 and np.abs(full - mesh.vertices).max() > 0
     # the rig does not depend on the chunk size it was prepared in

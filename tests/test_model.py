@@ -285,7 +285,7 @@ def test_basis_decoder_is_a_rig_linear_in_z_ge(use_skinning):
     model, tgt, c = _basis_target(use_skinning)
     codes = model.encode_target(tgt["feat"], c, tgt["ops"])
     v = tgt["feat"].shape[0]
-    assert codes.basis.shape == (v, 128, 3)
+    assert codes.basis.shape == (v, 3, 128)
     gen = torch.Generator().manual_seed(1)
     z1, z2 = torch.rand(128, generator=gen), torch.rand(128, generator=gen)
     dv = lambda z: model.decode_target(tgt["feat"], c, codes, z)
