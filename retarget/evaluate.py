@@ -426,8 +426,11 @@ class Evaluation:
 
     def suite_animate(self) -> dict:
         """Driving from FACS weights: the ``self`` cases (same targets, same weights) decoded from
-        z_GE = [w, 0]; MSE and segment-averaged MSE in mm² against the rig."""
-        res = {"exact_gt": True, "methods": {}}
+        z_GE = [w, 0]; MSE and segment-averaged MSE in mm² against the rig, and the do-nothing
+        MSE (the target neutral itself) of the same cases."""
+        cases = self.data.cases("self")
+        res = {"exact_gt": True, "methods": {}, "do_nothing_mse_mm2": float(np.mean(
+            np.concatenate([squared_errors_mm2(c.target.neutral[None], c.gt).mean(1) for c in cases])))}
         for m in self.methods:
             errs = []
             for case in self._bar(self.data.cases("self"), f"animate [{m.name}]"):
@@ -564,7 +567,9 @@ def to_markdown(results: dict) -> str:
         out.append(md_table(["method", "rig MSE", "segment-avg MSE", "weight MAE"], rows) + "\n")
     if "animate" in s:
         out.append("### Driving from FACS weights (animate: the self-retargeting targets and weights, "
-                   "decoded from z_GE = [w, 0]; exact GT)\n")
+                   "decoded from z_GE = [w, 0]; exact GT"
+                   + (f"; do-nothing MSE {fmt(s['animate']['do_nothing_mse_mm2'])}"
+                      if "do_nothing_mse_mm2" in s["animate"] else "") + ")\n")
         rows = [[m, fmt(get("animate", m, "mse_mm2")), fmt(get("animate", m, "seg_mse_mm2")),
                  fmt(get("self", m, "mse_mm2"))] for m in methods if m in s["animate"]["methods"]]
         out.append(md_table(["method", "MSE", "segment-avg MSE", "self-retargeting MSE (same cases)"],

@@ -151,6 +151,7 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     assert inv["mse_mm2"] < 1e-8 and inv["weight_mae"] == 0.0
     assert "oracle (u,v)" not in res["inverse"]["methods"]
     assert res["animate"]["methods"]["gt+offset"]["mse_mm2"] == pytest.approx(expected)
+    assert res["animate"]["do_nothing_mse_mm2"] > 0.01
     assert "oracle (u,v)" not in res["animate"]["methods"]
     jit = res["jitter"]["methods"]["gt+offset"]["raw"]
     assert jit["jitter_mm"] == pytest.approx(res["jitter"]["gt_jitter_mm"])
