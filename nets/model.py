@@ -318,8 +318,9 @@ class NFSModel(nn.Module):
                    chunk: int | None = None) -> TargetCodes:
         """``codes`` with ``basis`` (V, 3, code_dim) = (ω_Skin ⊙ M(x))ᵀ filled in for the V vertices of
         ``feat`` (V, 6) (``codes`` must describe the same vertices), computed ``chunk`` vertices at
-        a time; ω_Skin is then no longer needed to decode and is dropped when ``codes`` had none
-        cached. ``codes`` unchanged for the MLP decoder."""
+        a time, with ω_Skin folded in (the cached one, or computed per chunk from z_Skin when
+        ``codes.omega_skin`` is None); the other fields are kept. ``codes`` unchanged for the MLP
+        decoder."""
         if self.cfg.decoder != "basis":
             return codes
         self._check_image_code(c)
