@@ -11,7 +11,11 @@ displacement Δv (V_tgt, 3) for every target vertex, in the canonical units of t
 - skinning encoder: DiffusionNet on M_tgt, per vertex, sigmoid -> z_Skin ∈ (0, 1)^L;
 - skinning block: MLP z_Skin -> ω_Skin ∈ R^128 per vertex, z_LE = ω_Skin ⊙ z_GE;
 - decoder: per-vertex MLP of 8 linear layers (GroupNorm + ReLU after all but the last) on
-  [v_tgt, c_tgt, z_ID, z_LE] -> Δv.
+  [v_tgt, c_tgt, z_ID, z_LE] -> Δv (``decoder="mlp"``, the paper's); or, with ``decoder="basis"``,
+  a per-vertex MLP on the target alone, [v_tgt, γ(x_tgt), c_tgt, z_ID, z_Skin] -> M(x) ∈
+  R^(code_dim x 3), and Δv = M(x)ᵀ z_LE: linear in z_GE, a blendshape rig of code_dim shapes per
+  target (γ = Fourier features of the canonical position). M, with ω_Skin folded in, is computed
+  once per target (``TargetCodes.basis``), so each frame is one matrix-vector product.
 
 Choices the paper leaves open (see ``NFSConfig``): one CNN shared by all encoders and the decoder
 (the paper gives each encoder its own CNN; sharing lets the target image be encoded once); the
@@ -33,6 +37,7 @@ from .diffusion_net import DiffusionNet
 
 CANONICAL_FRAMES = ("bbox", "face")   # NFSConfig.canonical (retarget.canonical.FRAMES)
 VERTEX_FEATURE_DIM = 6  # canonical position (3) + unit vertex normal (3)
+DECODERS = ("mlp", "basis")
 
 
 #: Upper bounds of NFSConfig's integer fields: several times the paper's sizes, low enough that a
@@ -41,7 +46,19 @@ VERTEX_FEATURE_DIM = 6  # canonical position (3) + unit vertex normal (3)
 MAX_CONFIG_VALUES = dict(code_dim=2048, image_code_dim=2048, n_facs=2048, image_size=1024,
                          image_channels=16, cnn_width=512, enc_width=2048, enc_blocks=32, k_eig=512,
                          n_segments=256, skin_hidden=2048, skin_layers=32, decoder_width=2048,
-                         decoder_layers=32, norm_groups=512)
+                         decoder_layers=32, norm_groups=512, decoder_fourier=16)
+MIN_CONFIG_VALUES = dict(decoder_fourier=0)   # every other integer field is >= 1
+#: allowed values of NFSConfig's string fields
+STR_CHOICES = dict(canonical=CANONICAL_FRAMES, decoder=DECODERS)
+
+
+def _expected(name: str, kind: str) -> str:
+    """What NFSConfig field ``name`` of type ``kind`` accepts, for its error message."""
+    if kind == "str":
+        return f"one of {STR_CHOICES[name]}"
+    if kind == "int":
+        return f"an int in {MIN_CONFIG_VALUES.get(name, 1)}..{MAX_CONFIG_VALUES[name]}"
+    return f"a {kind}"
 
 
 @dataclass(frozen=True)
@@ -69,6 +86,12 @@ class NFSConfig:
             encoder or block, the decoder takes z_GE broadcast to every vertex.
         canonical: the canonical frame the model was trained in (``retarget.canonical``):
             "bbox" (bounding box; every checkpoint without the key) or "face" (fitted to the face).
+        decoder: "mlp" = the paper's decoder, nonlinear in the code; "basis" = a per-vertex
+            basis M(x) (code_dim x 3) from the target's features, Δv = M(x)ᵀ z_LE (Δv = M(x)ᵀ z_GE
+            without skinning). Checkpoints older than the field load as "mlp".
+        decoder_fourier: octaves of Fourier features sin/cos(2^k π x / 8), k < decoder_fourier, of
+            the canonical position (a 16-unit-wide head) added to the basis decoder's input; 0 =
+            none. Only the basis decoder reads it.
     """
 
     code_dim: int = 128
@@ -89,6 +112,8 @@ class NFSConfig:
     norm_groups: int = 8
     use_skinning: bool = True
     canonical: str = "bbox"
+    decoder: str = "mlp"
+    decoder_fourier: int = 0
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -96,16 +121,14 @@ class NFSConfig:
             if f.type == "bool":
                 ok = isinstance(value, bool)
             elif f.type == "str":
-                ok = value in CANONICAL_FRAMES
+                ok = value in STR_CHOICES[f.name]
             elif f.type == "float":
                 ok = isinstance(value, (int, float)) and not isinstance(value, bool)
             else:
                 ok = (isinstance(value, int) and not isinstance(value, bool)
-                      and 1 <= value <= MAX_CONFIG_VALUES[f.name])
+                      and MIN_CONFIG_VALUES.get(f.name, 1) <= value <= MAX_CONFIG_VALUES[f.name])
             if not ok:
-                raise ValueError(f"NFSConfig.{f.name}: expected a {f.type}"
-                                 f"{f' in 1..{MAX_CONFIG_VALUES[f.name]}' if f.type == 'int' else ''}"
-                                 f"{' in ' + str(CANONICAL_FRAMES) if f.type == 'str' else ''}, "
+                raise ValueError(f"NFSConfig.{f.name}: expected {_expected(f.name, f.type)}, "
                                  f"got {str(value)[:40]!r}")
         if self.n_facs > self.code_dim:
             raise ValueError(f"NFSConfig: n_facs ({self.n_facs}) must not exceed code_dim "
@@ -213,11 +236,16 @@ class TargetCodes:
         omega_skin: (V, code_dim) skinning weights ω_Skin, cached for all the target's
             expressions; None without skinning, or to have ``local_code`` compute ω_Skin from
             z_skin chunk by chunk (no (V, code_dim) array kept, for huge meshes).
+        basis: (V, 3, code_dim) the basis decoder's rig Bᵀ, B = ω_Skin ⊙ M(x) (M(x) without
+            skinning), so Δv = Bᵀ z_GE per vertex (one (3V, code_dim) matrix-vector product per
+            frame), in the units of the features' positions; None for the MLP decoder, or to have
+            ``decode_target`` compute M chunk by chunk.
     """
 
     z_id: torch.Tensor
     z_skin: torch.Tensor | None
     omega_skin: torch.Tensor | None
+    basis: torch.Tensor | None = None
 
 
 class NFSModel(nn.Module):
@@ -244,8 +272,13 @@ class NFSModel(nn.Module):
                                                  last_activation=torch.sigmoid)
             self.skinning_mlp = mlp([cfg.n_segments]
                                     + [cfg.skin_hidden] * (cfg.skin_layers - 1) + [cfg.code_dim])
-        self.decoder = mlp([c_in + 2 * cfg.code_dim]
-                           + [cfg.decoder_width] * (cfg.decoder_layers - 1) + [3], cfg.norm_groups)
+        if cfg.decoder == "mlp":
+            dims = [c_in + 2 * cfg.code_dim, 3]
+        else:   # [v, γ(x), c, z_ID, z_Skin] -> M(x), code_dim x 3 per vertex
+            dims = [c_in + 6 * cfg.decoder_fourier + cfg.code_dim
+                    + cfg.n_segments * cfg.use_skinning, 3 * cfg.code_dim]
+        self.decoder = mlp(dims[:1] + [cfg.decoder_width] * (cfg.decoder_layers - 1) + dims[1:],
+                           cfg.norm_groups)
 
     # ----------------------------------------------------------------------------- encoders
     def image_code(self, img: torch.Tensor) -> torch.Tensor:
@@ -292,13 +325,40 @@ class NFSModel(nn.Module):
         """Skinning block Ψ: z_LE = ω_Skin ⊙ z_GE; z_skin (V, L), z_ge (code_dim,) -> (V, code_dim)."""
         return self.skinning_weights(z_skin) * z_ge
 
-    def encode_target(self, feat: torch.Tensor, c: torch.Tensor, ops) -> TargetCodes:
-        """z_ID, z_Skin and ω_Skin of a target neutral mesh, computed once for all its expressions."""
+    def encode_target(self, feat: torch.Tensor, c: torch.Tensor, ops, basis: bool = True,
+                      chunk: int | None = None) -> TargetCodes:
+        """z_ID, z_Skin and ω_Skin of a target neutral mesh, computed once for all its expressions,
+        and, for the basis decoder when ``basis`` is True, its rig (``with_basis``, ``chunk``
+        vertices at a time)."""
         z_id = self.encode_identity(feat, c, ops)
         if not self.cfg.use_skinning:
-            return TargetCodes(z_id, None, None)
-        z_skin = self.encode_skinning(feat, c, ops)
-        return TargetCodes(z_id, z_skin, self.skinning_weights(z_skin))
+            codes = TargetCodes(z_id, None, None)
+        else:
+            z_skin = self.encode_skinning(feat, c, ops)
+            codes = TargetCodes(z_id, z_skin, self.skinning_weights(z_skin))
+        return self.with_basis(feat, c, codes, chunk) if basis else codes
+
+    def with_basis(self, feat: torch.Tensor, c: torch.Tensor, codes: TargetCodes,
+                   chunk: int | None = None) -> TargetCodes:
+        """``codes`` with ``basis`` (V, 3, code_dim) = (ω_Skin ⊙ M(x))ᵀ filled in for the V vertices of
+        ``feat`` (V, 6) (``codes`` must describe the same vertices), computed ``chunk`` vertices at
+        a time, with ω_Skin folded in (the cached one, or computed per chunk from z_Skin when
+        ``codes.omega_skin`` is None); the other fields are kept. ``codes`` unchanged for the MLP
+        decoder."""
+        if self.cfg.decoder != "basis":
+            return codes
+        self._check_image_code(c)
+        bias = self._decoder_bias(c, codes.z_id)
+        basis = feat.new_empty(feat.shape[0], 3, self.cfg.code_dim)   # filled in place: no 2x peak
+        for rows in _chunks(feat.shape[0], chunk):
+            z_skin = None if codes.z_skin is None else codes.z_skin[rows]
+            m = self._basis_rows(feat[rows], z_skin, bias)                 # (n, code_dim, 3)
+            if self.cfg.use_skinning:
+                omega = (codes.omega_skin[rows] if codes.omega_skin is not None
+                         else self.skinning_weights(z_skin))
+                m = m * omega[:, :, None]
+            basis[rows] = m.transpose(1, 2)
+        return dataclasses.replace(codes, basis=basis)
 
     def local_code(self, codes: TargetCodes, z_ge: torch.Tensor,
                    rows: torch.Tensor | slice | None = None) -> torch.Tensor:
@@ -319,9 +379,37 @@ class NFSModel(nn.Module):
         return self.skinning_block(pick(codes.z_skin), z)
 
     # ----------------------------------------------------------------------------- decoder
+    def _decoder_bias(self, c: torch.Tensor, z_id: torch.Tensor) -> torch.Tensor:
+        """The decoder's first layer bias with its c and z_ID columns folded in (width,): they are
+        the same for every vertex of a target (2/3 of that layer's work per row saved)."""
+        first, d = self.decoder[0], self.cfg.code_dim
+        start = VERTEX_FEATURE_DIM + (6 * self.cfg.decoder_fourier if self.cfg.decoder == "basis"
+                                      else 0)
+        w_const = first.weight[:, start:start + self.cfg.image_code_dim + d]
+        return torch.addmv(first.bias, w_const, torch.cat([c, z_id]))
+
+    def _basis_rows(self, feat: torch.Tensor, z_skin: torch.Tensor | None,
+                    bias: torch.Tensor) -> torch.Tensor:
+        """The basis decoder's M(x) (n, code_dim, 3) of n vertices: feat (n, 6), z_skin (n, L) (None
+        without skinning), bias from ``_decoder_bias``."""
+        first, k = self.decoder[0], self.cfg.decoder_fourier
+        x = feat
+        if k:
+            ang = feat[:, None, :3] * (torch.pi / 8 * 2.0 ** torch.arange(k, device=feat.device)
+                                       )[:, None]                          # (n, k, 3)
+            x = torch.cat([feat, ang.sin().flatten(1), ang.cos().flatten(1)], dim=1)
+        n_x, n_const = x.shape[1], self.cfg.image_code_dim + self.cfg.code_dim
+        h = x @ first.weight[:, :n_x].T + bias
+        if self.cfg.use_skinning:
+            if z_skin is None:
+                raise ValueError("the basis decoder with skinning needs z_Skin (TargetCodes.z_skin)")
+            h = h + z_skin @ first.weight[:, n_x + n_const:].T
+        return self.decoder[1:](h).reshape(feat.shape[0], self.cfg.code_dim, 3)
+
     def decode(self, feat: torch.Tensor, c: torch.Tensor, z_id: torch.Tensor, z_code: torch.Tensor,
-               chunk: int | None = None) -> torch.Tensor:
-        """Per-vertex decoder D: [v, c, z_ID, z_code] -> Δv.
+               chunk: int | None = None, z_skin: torch.Tensor | None = None) -> torch.Tensor:
+        """Per-vertex decoder D: [v, c, z_ID, z_code] -> Δv (the basis decoder: Δv = M(x)ᵀ z_code
+        with M from [v, γ(x), c, z_ID, z_Skin]).
 
         Args:
             feat: (V, 6) target vertex features (any subset of the target's rows).
@@ -330,6 +418,7 @@ class NFSModel(nn.Module):
             z_code: (V, code_dim) z_LE, or (code_dim,) z_GE broadcast to all rows (no skinning).
             chunk: decode at most this many vertices at a time; the same result, and under
                 ``torch.no_grad`` the working memory is that of one chunk.
+            z_skin: (V, L) z_Skin of these rows: read by the basis decoder with skinning only.
         Returns:
             (V, 3) float32 displacement Δv in the units of ``feat``'s positions.
         """
@@ -337,13 +426,14 @@ class NFSModel(nn.Module):
         if z_id.shape != (d,) or z_code.shape not in ((n, d), (d,)):
             raise ValueError(f"decode: z_id must be ({d},) and z_code ({n}, {d}) or ({d},); got "
                              f"{tuple(z_id.shape)} and {tuple(z_code.shape)}")
-        return self.decode_many(feat, c, z_id, z_code[None], chunk)[0]
+        return self.decode_many(feat, c, z_id, z_code[None], chunk, z_skin)[0]
 
     def decode_many(self, feat: torch.Tensor, c: torch.Tensor, z_id: torch.Tensor,
-                    z_codes: torch.Tensor, chunk: int | None = None) -> torch.Tensor:
+                    z_codes: torch.Tensor, chunk: int | None = None,
+                    z_skin: torch.Tensor | None = None) -> torch.Tensor:
         """``decode`` for S expressions of one target in one pass: z_codes (S, V, code_dim) z_LE or
         (S, code_dim) z_GE broadcast to all rows -> Δv (S, V, 3); ``chunk`` bounds the rows per
-        pass (working memory S x chunk rows).
+        pass (working memory S x chunk rows); ``z_skin`` (V, L) as in ``decode``.
 
         The first linear layer is applied by parts: its columns for c and z_ID, the same for every
         row, are folded into a bias once per call, which removes 2/3 of that layer's work per row
@@ -356,10 +446,16 @@ class NFSModel(nn.Module):
             raise ValueError(f"decode_many: z_id must be ({d},) and z_codes (S, {n}, {d}) or "
                              f"(S, {d}); got {tuple(z_id.shape)} and {tuple(z_codes.shape)}")
         self._check_image_code(c)
+        bias = self._decoder_bias(c, z_id)                                        # (width,)
+        if self.cfg.decoder == "basis":
+            out = []
+            for rows in _chunks(n, chunk):
+                m = self._basis_rows(feat[rows], None if z_skin is None else z_skin[rows], bias)
+                out.append(torch.einsum("sd,mdc->smc", z_codes, m) if per_frame
+                           else torch.einsum("smd,mdc->smc", z_codes[:, rows], m))
+            return torch.cat(out, dim=1) if out else feat.new_zeros(len(z_codes), 0, 3)
         first, rest = self.decoder[0], self.decoder[1:]
-        w_v, w_const, w_code = first.weight.split(
-            [VERTEX_FEATURE_DIM, first.in_features - VERTEX_FEATURE_DIM - d, d], dim=1)
-        bias = torch.addmv(first.bias, w_const, torch.cat([c, z_id]))            # (width,)
+        w_v, w_code = first.weight[:, :VERTEX_FEATURE_DIM], first.weight[:, -d:]
         if per_frame:
             bias = (bias + z_codes @ w_code.T)[:, None]                           # (S, 1, width)
         out = []
@@ -379,7 +475,8 @@ class NFSModel(nn.Module):
 
         ``feat`` (V, 6) and ``c`` are the target's, ``codes`` from ``encode_target``; rows (n,) int64
         selects the vertices to decode (None = all); ``chunk`` as in ``decode`` (z_LE is formed
-        chunk by chunk too). Drive from FACS weights with ``z_ge = weights_to_code(w)``.
+        chunk by chunk too). Drive from FACS weights with ``z_ge = weights_to_code(w)``. With
+        ``codes.basis`` (the basis decoder) this is one product (3n, code_dim) @ z_GE per frame.
         """
         if z_ge.dim() == 1:
             return self.decode_target(feat, c, codes, z_ge[None], rows, chunk)[0]
@@ -387,7 +484,13 @@ class NFSModel(nn.Module):
         out = []
         for part in _chunks(n, chunk):
             idx = part if rows is None else rows[part]
-            out.append(self.decode_many(feat[idx], c, codes.z_id, self.local_code(codes, z_ge, idx)))
+            if codes.basis is not None:
+                b = codes.basis[idx]                                               # (m, 3, d)
+                out.append((b.reshape(-1, b.shape[-1]) @ z_ge.T).T.reshape(len(z_ge), -1, 3))
+                continue
+            z_skin = None if codes.z_skin is None else codes.z_skin[idx]
+            out.append(self.decode_many(feat[idx], c, codes.z_id, self.local_code(codes, z_ge, idx),
+                                        z_skin=z_skin))
         return torch.cat(out, dim=1) if out else feat.new_zeros(len(z_ge), 0, 3)
 
     # ----------------------------------------------------------------------------- training
@@ -414,7 +517,10 @@ class NFSModel(nn.Module):
         z_ge = torch.stack([self.encode_expression(f, c, o)
                             for f, c, o in zip(src_feats, src_cs, src_ops)])
         z_code = self.local_code(codes, z_ge, vertex_subset)       # (S, n, code_dim) or (S, code_dim)
-        dv = self.decode_many(sub, tgt_c, codes.z_id, z_code)
+        if codes.basis is not None:
+            dv = self.decode_target(tgt_feat, tgt_c, codes, z_ge, vertex_subset)
+        else:
+            dv = self.decode_many(sub, tgt_c, codes.z_id, z_code)
         return {"z_ID": codes.z_id, "z_Skin": codes.z_skin, "z_GE": z_ge,
                 "z_LE": z_code if self.cfg.use_skinning else None, "dv": dv}
 

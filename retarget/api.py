@@ -192,11 +192,17 @@ class Retargeter:
             feat = proxy.feat  # the proxy is the mesh itself: its features are computed already
         feat_p, img_p, ops_p = proxy.torch_inputs(self.device)
         c = self.model.image_code(img_p)[0]
-        codes = self.model.encode_target(feat_p, c, ops_p)
+        codes = self.model.encode_target(feat_p, c, ops_p, basis=cluster is None, chunk=self.chunk)
+        feat = torch.from_numpy(feat).to(self.device)
         if cluster is not None and codes.omega_skin is not None:
             idx = torch.from_numpy(cluster).to(self.device)
             codes = TargetCodes(codes.z_id, codes.z_skin[idx], codes.omega_skin[idx])
-        return Target(mesh, proxy, torch.from_numpy(feat).to(self.device), c, codes)
+            if self.cfg.decoder == "basis":   # the rig at full resolution; ω_Skin is folded into it
+                codes = self.model.with_basis(feat, c, TargetCodes(codes.z_id, codes.z_skin, None),
+                                              self.chunk)
+        elif cluster is not None:
+            codes = self.model.with_basis(feat, c, codes, self.chunk)
+        return Target(mesh, proxy, feat, c, codes)
 
     # --------------------------------------------------------------------------- codes
     def source_topology(self, ref: Mesh, neutral: bool = False) -> SourceTopology:
@@ -326,8 +332,14 @@ class Retargeter:
         return self.decode(target, weight_codes(weights), progress)
 
     def bake(self, target) -> BakedRig:
-        """Decode the 53 one-hot expressions once: a linear blendshape rig for the target."""
+        """Decode the 53 one-hot expressions once: a linear blendshape rig for the target. With the
+        basis decoder it is the decoder's own rig, ``codes.basis`` (exact for FACS-weight codes)."""
         target = self.prepare(target)
+        if target.codes.basis is not None:
+            deltas = target.codes.basis[:, :, :N_FACS].permute(2, 0, 1).cpu().numpy()  # (53, V, 3)
+            deltas = target.proxy.canon.displacement_from_canonical(deltas)
+            return BakedRig(target.mesh.vertices.astype(np.float32),
+                            np.ascontiguousarray(deltas, dtype=np.float32))
         shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
         return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
 

@@ -17,7 +17,10 @@ Sections (each figure the median of several runs; devices: the CPU, and CUDA whe
   by the warm-up call; ``Retargeter.source_topology``). The floor is
   linear blendshape evaluation (numpy, neutral + w·deltas) of the target's procedural rig, the peer
   the no-skinning ablation (``use_skinning=False``, the same config otherwise: timings do not
-  depend on trained weights, so an untrained peer is used unless ``peer`` names a checkpoint).
+  depend on trained weights, so an untrained peer is used unless ``peer`` names a checkpoint). The
+  other decoder (``model.decoder`` "mlp" or "basis", the same config otherwise, untrained) is timed
+  the same way, with the warm preparation of the target (operators computed, no cache), so the
+  table by decoder gives each decoder's per-frame and preparation cost.
 - ``train``: training samples/s of a config (``Trainer``, ``log_every`` 1, median over steps after
   the first). The pool is shrunk to 2 identities and validation to 1 so that target preparation,
   which real runs amortise over ``pool_refresh`` steps, is not timed.
@@ -252,6 +255,7 @@ def bench_network(r, target, frames, weights, repeats: int) -> dict:
                          w_list, repeats),
         "invert": _rate(r.invert, lambda: r.invert(frames), frames, repeats),
     }
+    out["prepare_s"], _ = median_time(lambda: r.prepare(target.mesh), repeats)
     bake_s, _ = median_time(lambda: r.bake(target), 1)
     baked = r.bake(target)
     out["baked"] = {**_rate(baked.evaluate, lambda: baked.evaluate(weights), w_list, repeats),
@@ -283,14 +287,18 @@ def bench_frames(checkpoint, device: str, n_vertices: int, n_frames: int, repeat
         torch.manual_seed(0)
         cfg = dataclasses.replace(net.cfg, use_skinning=False)
         peer_r = Retargeter(NFSModel(cfg), device=device)
+    torch.manual_seed(0)
+    other = "basis" if net.cfg.decoder == "mlp" else "mlp"
+    other_r = Retargeter(NFSModel(dataclasses.replace(net.cfg, decoder=other)), device=device)
     tess = tessellate(n_vertices=n_vertices, kind="adaptive")
     rig_t = build_rig(sample_identity(0, split="test"), tess)       # target identity
     rig_s = build_rig(sample_identity(1, split="test"), tess)       # source identity
     weights = sample_weights(np.random.default_rng(0), n_frames, "mixed").astype(np.float32)
     frames = [Mesh(f, rig_s.faces, "frame") for f in rig_s.evaluate(weights)]
     target_mesh = Mesh(rig_t.neutral, rig_t.faces, "target")
-    out = {"n_vertices": len(rig_t.neutral), "frames": n_frames}
-    for name, r in (("model", net), ("peer_no_skinning", peer_r)):
+    out = {"n_vertices": len(rig_t.neutral), "frames": n_frames, "decoder": net.cfg.decoder,
+           "other_decoder_name": other}
+    for name, r in (("model", net), ("peer_no_skinning", peer_r), ("other_decoder", other_r)):
         target = r.prepare(target_mesh)
         out[name] = bench_network(r, target, frames, weights, repeats)
     out["floor_linear_blendshapes"] = _rate(rig_t.evaluate, lambda: rig_t.evaluate(weights),
@@ -424,6 +432,17 @@ def to_markdown(results: dict) -> str:
         out.append(f"Baking the rig (53 decoded shapes): {fmt(baked['bake_s'])} s; the baked rig "
                    f"differs from the full decoder by an MSE of {fmt(baked['vs_full_decoder_mse_mm2'])} "
                    f"mm² on the same weights.\n")
+        if "other_decoder" in fr:
+            out.append(f"By decoder (the model's, {fr['decoder']}, and an untrained {fr['other_decoder_name']} "
+                       "decoder of the same config; prepare = warm, operators recomputed):\n")
+            out.append(md_table(
+                ["decoder", "prepare (s)", "animate latency (ms)", "animate frames/s", "bake (s)",
+                 "baked frames/s", "baked vs decoder (mm²)"],
+                [[d, fmt(m["prepare_s"]), fmt(m["animate"]["latency_ms"]),
+                  fmt(m["animate"]["throughput_fps"]), fmt(m["baked"]["bake_s"]),
+                  fmt(m["baked"]["throughput_fps"]), fmt(m["baked"]["vs_full_decoder_mse_mm2"])]
+                 for d, m in ((fr["decoder"], fr["model"]),
+                              (fr["other_decoder_name"], fr["other_decoder"]))]) + "\n")
         missed = {t["target"] for t in results.get("targets", []) if t["device"] == device and not t["met"]}
         for op in [op for op in ("transfer", "animate", "invert")
                    if {f"{op}_fps", f"{op}_call_fps"} & missed]:

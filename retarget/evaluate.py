@@ -18,7 +18,9 @@ number below has exact ground truth unless a table says otherwise:
 - ``real_rig``: the artist-made ARKit rig ``makehuman_arkit.npz`` (one MakeHuman identity):
   real → real self-retargeting and inversion of its frames (exact GT), procedural → real and
   real → procedural (GT = the other rig driven by the same FACS weights: *semantic*, not exact,
-  because two artists' shapes of one name differ), per ARKit shape (one-hot) and on sampled weights.
+  because two artists' shapes of one name differ), per ARKit shape (one-hot) and on sampled weights;
+  and the real rig's neutral driven from the true weights (mapped to ICT names; the decoder alone),
+  with the do-nothing error (the neutral itself) beside it.
 
 - ``head_self``, ``head_cross_identity``, ``head_cross_topology``, ``head_cross_crop``: realistic
   held-out heads (``data_synth.makehuman``: ``sample_head_identity(seed + i, split="test")``, the
@@ -362,6 +364,7 @@ class EvalData:
                 "procedural_to_real": Case("procedural id 0 -> real", proc, w, real, a, exact=False),
                 "real_to_procedural": Case("real -> procedural id 0", real, a, proc, w, exact=False),
                 "invert": Case("invert real", real, a, real, a, exact=True),
+                "animate": Case("animate real", real, a, real, a, exact=True),
             }
         return out
 
@@ -406,9 +409,11 @@ class NetworkMethod:
         target = self._target(case.target)
         return {f: self.r.decode(target, z if f is None else smooth_codes(z, f, fps)) for f in filters}
 
-    def animate(self, case: Case) -> np.ndarray:
-        """(T,Vt,3) cm: the target driven by the case's FACS weights (``Retargeter.animate``)."""
-        return self.r.animate(self._target(case.target), case.target_weights)
+    def animate(self, case: Case, weights: np.ndarray | None = None) -> np.ndarray:
+        """(T,Vt,3) cm: the target driven by FACS weights (``Retargeter.animate``): (T,53) ICT
+        ``weights``, by default the case's target weights."""
+        return self.r.animate(self._target(case.target),
+                              case.target_weights if weights is None else weights)
 
     def invert(self, case: Case) -> np.ndarray:
         """(T,53) ICT weights in [0,1] predicted from the source frames."""
@@ -425,7 +430,7 @@ class DoNothingMethod:
         pred = np.broadcast_to(case.target.neutral, case.gt.shape)
         return {f: pred for f in filters}
 
-    def animate(self, case: Case) -> np.ndarray:
+    def animate(self, case: Case, weights: np.ndarray | None = None) -> np.ndarray:
         return np.broadcast_to(case.target.neutral, case.gt.shape)
 
     def invert(self, case: Case) -> np.ndarray:
@@ -443,7 +448,7 @@ class ClosestPointMethod:
                                              case.source_frames, case.target.neutral,
                                              case.target.faces, frame="face")}
 
-    def animate(self, case: Case):
+    def animate(self, case: Case, weights: np.ndarray | None = None):
         return None
 
     def invert(self, case: Case):
@@ -469,7 +474,7 @@ class OracleMethod:
                                      case.target.neutral)
         return {None: pred}
 
-    def animate(self, case: Case):
+    def animate(self, case: Case, weights: np.ndarray | None = None):
         return None
 
     def invert(self, case: Case):
@@ -673,6 +678,11 @@ class Evaluation:
                         used = m_arkit.sum(1) > 0          # tongueOut has no ICT shape
                         mae = np.abs(a - case.source_weights)[:, used].mean(1)
                         block[key] = {"rig_mse_mm2": frame_mse, "weight_mae": mae}
+                    elif key == "animate":
+                        pred = m.animate(case, (case.target_weights @ m_arkit).astype(np.float32))
+                        if pred is None:
+                            continue
+                        block[key] = {"mse_mm2": squared_errors_mm2(pred, case.gt).mean(1)}
                     else:
                         preds = m.transfer(case)
                         if preds is None:                  # the oracle: the real rig has no (u, v)
@@ -820,16 +830,17 @@ def to_markdown(results: dict) -> str:
                    "driven by the same weights (semantic, not exact).\n")
         header = ["method", "real→real MSE (exact)", "invert: rig MSE (exact)",
                   "invert: weight MAE (exact)", "procedural→real MSE (semantic)",
-                  "real→procedural MSE (semantic)"]
+                  "real→procedural MSE (semantic)", "animate from true weights MSE (exact)"]
         keys = [("real_to_real", "mse_mm2"), ("invert", "rig_mse_mm2"), ("invert", "weight_mae"),
-                ("procedural_to_real", "mse_mm2"), ("real_to_procedural", "mse_mm2")]
+                ("procedural_to_real", "mse_mm2"), ("real_to_procedural", "mse_mm2"),
+                ("animate", "mse_mm2")]
         rows = [[m] + [cell("real_rig", m, "sampled", *k) for k in keys]
                 for m in methods if m in r["methods"]]
         out.append(md_table(header, rows) + "\n")
         networks = [m for m in methods if m in r["methods"] and m not in BASELINES_FIRST + BASELINES_LAST]
         for m in networks[:1]:
             cols = ["real_to_real.mse_mm2", "invert.rig_mse_mm2", "invert.weight_mae",
-                    "procedural_to_real.mse_mm2", "real_to_procedural.mse_mm2"]
+                    "procedural_to_real.mse_mm2", "real_to_procedural.mse_mm2", "animate.mse_mm2"]
             rows = [[shape] + [cell("real_rig", m, "per_shape", shape, c) for c in cols]
                     for shape in r["shapes"]]
             out.append(f"<details><summary>Real rig per ARKit shape (one-hot), {m}</summary>\n\n"

@@ -352,10 +352,10 @@ def test_checkpoint_configs_are_not_trusted(capsys, good, tmp_path, no_hang):
     """Absurd or wrongly typed config values and fields: refused on load, quickly, in one line."""
     state = torch.load(good / "tiny.pt", weights_only=True)
     cases = {"huge_k_eig": ({"model_config": {**state["model_config"], "k_eig": 10**9}},
-                            "NFSConfig.k_eig: expected a int in 1..512, got '1000000000'"),
+                            "NFSConfig.k_eig: expected an int in 1..512, got '1000000000'"),
              "string_config": ({"model_config": "tiny"}, "model_config is a str, not a mapping"),
              "float_width": ({"model_config": {**state["model_config"], "enc_width": 16.5}},
-                             "NFSConfig.enc_width: expected a int"),
+                             "NFSConfig.enc_width: expected an int"),
              "wide_claim": ({"model_config": {**state["model_config"], "decoder_width": 2048}},
                             "checkpoint does not match this version's model"),
              "channels": ({"model_config": {**state["model_config"], "image_channels": 3}},

@@ -65,9 +65,13 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
     assert len(sizes) == 2 and all(r["seconds"] > 0 and r["peak_rss_mb"] > r["rss_increase_mb"] >= 0
                                    for r in res["prepare"]["cpu"])
     fr = res["frames"]["cpu"]
-    for who in ("model", "peer_no_skinning"):
+    for who in ("model", "peer_no_skinning", "other_decoder"):
         for op in ("transfer", "animate", "baked", "invert"):
             assert fr[who][op]["latency_ms"] > 0 and fr[who][op]["throughput_fps"] > 0
+        assert fr[who]["prepare_s"] > 0
+    # the tiny checkpoint has the MLP decoder; the basis decoder's baked rig is the decoder itself
+    assert fr["decoder"] == "mlp" and fr["other_decoder_name"] == "basis"
+    assert fr["other_decoder"]["baked"]["vs_full_decoder_mse_mm2"] <= 1e-6
     # measured, not raced: which is faster is the bench's finding, not a test (it flaked under load)
     assert fr["floor_linear_blendshapes"]["throughput_fps"] > 0
     assert res["train"]["samples_per_s"] > 0 and res["train"]["steps_timed"] == 2
@@ -76,6 +80,7 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
     md = (out / "bench.md").read_text()
     assert "Target preparation" in md and "linear blendshapes (floor)" in md and "samples/s" in md
     assert "| per call frames/s | batched frames/s |" in md
+    assert "| basis |" in md and "baked vs decoder (mm²)" in md
     assert "measured by undoing it" in md and "| target encoded once for S sources |" in md
     assert to_markdown(res) in md
 

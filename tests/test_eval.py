@@ -181,6 +181,7 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     assert inv["mse_mm2"] < 1e-8 and inv["weight_mae"] == 0.0
     assert "oracle (u,v)" not in res["inverse"]["methods"]
     assert res["animate"]["methods"]["gt+offset"]["mse_mm2"] == pytest.approx(expected)
+    assert res["animate"]["methods"]["do nothing"]["mse_mm2"] > 0.01
     assert "oracle (u,v)" not in res["animate"]["methods"]
     jit = res["jitter"]["methods"]["gt+offset"]["raw"]
     assert jit["jitter_mm"] == pytest.approx(res["jitter"]["gt_jitter_mm"])
@@ -226,6 +227,8 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
                                   / real_methods["do nothing"]["sampled"]["real_to_real"]["mse_mm2"])
     frame = res["suites"]["frame"]["makehuman"]
     assert abs(frame["face"]["bust"]["scale_ratio"] - 1) < 0.05 and frame["bbox"]["bust"]["scale_ratio"] < 0.5
+    assert real["sampled"]["animate"]["mse_mm2"] > 0
+    assert real_methods["do nothing"]["sampled"]["animate"]["mse_mm2"] > 0
     md = (out / "eval.md").read_text()
     for title in ("Self-retargeting", "Cross-identity", "Cross-topology", "Inverse rigging",
                   "Jitter", "Real ARKit rig", "Driving from FACS weights", "| full |",
@@ -249,6 +252,40 @@ def test_real_rig_self_retargeting_ground_truth_is_exact():
     # the procedural source receives the same FACS weights in ICT form
     w = cases["procedural_to_real"].source_weights[jaw]
     assert w[FACS_NAMES.index("jawOpen")] == 1.0 and w.sum() == 1.0
+
+
+class RealRigGroundTruth:
+    """A stand-in method that is exact on the real rig: it evaluates the rig with the ARKit weights
+    of the ICT weights it is given."""
+
+    name = "real gt"
+
+    def __init__(self, names):
+        self.m = arkit_ict_matrix(names)
+
+    def transfer(self, case, filters=(None,), fps=30.0):
+        return {f: case.gt for f in filters}
+
+    def invert(self, case):
+        return case.source_weights @ self.m
+
+    def animate(self, case, weights=None):
+        return case.target.evaluate(ict_to_arkit_weights(weights, self.m))
+
+
+def test_real_rig_animate_is_scored_against_the_rig_with_the_do_nothing_error():
+    if not REAL_RIG.exists():
+        pytest.skip("real rig not present")
+    cfg = tiny_config()
+    rig = RealRig.load(REAL_RIG)
+    res = Evaluation(cfg, [DoNothingMethod(), RealRigGroundTruth(rig.names)],
+                     progress=False).run(["real_rig"])
+    methods = res["suites"]["real_rig"]["methods"]
+    m, nothing = methods["real gt"], methods["do nothing"]
+    assert m["sampled"]["animate"]["mse_mm2"] < 1e-8 and m["per_shape"]["jawOpen"]["animate.mse_mm2"] < 1e-8
+    assert nothing["sampled"]["animate"]["mse_mm2"] > 0.01
+    assert nothing["per_shape"]["jawOpen"]["animate.mse_mm2"] > 0.01
+    assert "animate from true weights MSE (exact)" in to_markdown(res)
 
 
 def test_markdown_marks_missing_rows():

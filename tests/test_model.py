@@ -1,5 +1,6 @@
 """Tests of nets.cnn and nets.model: shapes, per-vertex independence, chunking, gradients,
 the no-skinning ablation, the code for FACS weights and the configuration round trip."""
+import dataclasses
 import functools
 
 import numpy as np
@@ -269,3 +270,80 @@ def test_preset_benchmark_reports_each_preset_and_size():
     assert [(r["preset"], r["n_vertices"]) for r in rows] == [("tiny", 196), ("tiny", 400)]
     assert rows[0]["n_params"] == sum(p.numel() for p in tiny_model().parameters())
     assert all(r["forward_ms"] > 0 and r["backward_ms"] > 0 for r in rows)
+
+
+# ------------------------------------------------------------------------------- basis decoder
+def _basis_target(use_skinning=True, seed=0):
+    model = tiny_model(seed, decoder="basis", decoder_fourier=3, use_skinning=use_skinning)
+    tgt = make_mesh(2)
+    c = model.image_code(tgt["img"])[0]
+    return model, tgt, c
+
+
+@pytest.mark.parametrize("use_skinning", [True, False])
+def test_basis_decoder_is_a_rig_linear_in_z_ge(use_skinning):
+    model, tgt, c = _basis_target(use_skinning)
+    codes = model.encode_target(tgt["feat"], c, tgt["ops"])
+    v = tgt["feat"].shape[0]
+    assert codes.basis.shape == (v, 3, 128)
+    gen = torch.Generator().manual_seed(1)
+    z1, z2 = torch.rand(128, generator=gen), torch.rand(128, generator=gen)
+    dv = lambda z: model.decode_target(tgt["feat"], c, codes, z)
+    torch.testing.assert_close(dv(2.0 * z1 - 0.5 * z2), 2.0 * dv(z1) - 0.5 * dv(z2),
+                               rtol=1e-4, atol=1e-5)
+    assert dv(torch.zeros(128)).abs().max() == 0 and dv(z1).abs().max() > 0
+    # Δv = M(x)ᵀ z_LE: the cached rig, M computed per chunk, and decode_many on z_LE all agree
+    lean = model.encode_target(tgt["feat"], c, tgt["ops"], basis=False)
+    assert lean.basis is None
+    z = torch.stack([z1, z2])
+    full = model.decode_target(tgt["feat"], c, codes, z)
+    rows = torch.tensor([5, 0, 17, 3])
+    torch.testing.assert_close(model.decode_target(tgt["feat"], c, lean, z, chunk=7), full,
+                               rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(model.decode_target(tgt["feat"], c, lean, z, rows, chunk=3),
+                               full[:, rows], rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(
+        model.decode_many(tgt["feat"], c, codes.z_id, model.local_code(lean, z), z_skin=lean.z_skin),
+        full, rtol=1e-4, atol=1e-5)
+    if use_skinning:   # z_LE = ω_Skin ⊙ z_GE: ω_Skin is what makes the code local
+        omega = codes.omega_skin
+        torch.testing.assert_close(
+            model.decode(tgt["feat"], c, codes.z_id, omega * z1, z_skin=codes.z_skin), full[0],
+            rtol=1e-4, atol=1e-5)
+        with pytest.raises(ValueError, match="needs z_Skin"):
+            model.decode(tgt["feat"], c, codes.z_id, omega * z1)
+    # chunked preparation of the rig equals the whole
+    chunked = model.with_basis(tgt["feat"], c, dataclasses.replace(lean, omega_skin=None), chunk=10)
+    torch.testing.assert_close(chunked.basis, codes.basis, rtol=1e-4, atol=1e-6)
+
+
+def test_basis_decoder_gradients_reach_every_trained_part():
+    model, tgt, c_tgt = _basis_target()
+    model.train()
+    src = make_mesh(1)
+    c_src, c_tgt = model.image_code(torch.cat([src["img"], tgt["img"]]))
+    out = model.forward_pair(src["feat"], c_src, src["ops"], tgt["feat"], c_tgt, tgt["ops"],
+                             vertex_subset=torch.arange(0, 40))
+    assert out["dv"].shape == (40, 3) and out["z_LE"].shape == (40, 128)
+    out["dv"].square().mean().backward()
+    for part in ("decoder", "skinning_mlp", "skinning_encoder", "identity_encoder",
+                 "expression_encoder", "cnn"):
+        grads = [p.grad for n, p in model.named_parameters() if n.startswith(part)]
+        assert grads and all(g is not None for g in grads), part
+        assert sum(g.abs().sum() for g in grads) > 0, part
+
+
+def test_decoder_field_defaults_to_mlp_for_old_checkpoints():
+    old = {k: v for k, v in NFSConfig().to_dict().items() if k not in ("decoder", "decoder_fourier")}
+    assert NFSConfig.from_dict(old).decoder == "mlp"
+    assert NFSModel(NFSConfig.from_dict(old)).decoder[-1].out_features == 3
+    assert NFSModel(NFSConfig.preset("tiny", decoder="basis")).decoder[-1].out_features == 3 * 128
+    with pytest.raises(ValueError, match="decoder: expected one of"):
+        NFSConfig(decoder="linear")
+    with pytest.raises(ValueError, match="decoder_fourier: expected an int in 0..16"):
+        NFSConfig(decoder_fourier=-1)
+    # the MLP decoder keeps no rig
+    model = tiny_model()
+    tgt = make_mesh(1)
+    c = model.image_code(tgt["img"])[0]
+    assert model.encode_target(tgt["feat"], c, tgt["ops"]).basis is None
