@@ -58,6 +58,7 @@ TARGETS = (  # (key, measured quantity, op, threshold, unit)
     ("animate_fps", "animate (full network), 11k", ">=", 5.0, "frames/s"),
     ("baked_fps", "baked rig, 11k", ">=", 60.0, "frames/s"),
     ("invert_fps", "invert, 11k", ">=", 10.0, "frames/s"),
+    ("refine_added_ms", "refine: added per frame after the bake, 11k", "<=", 20.0, "ms"),
 )
 TARGETS_BY_KEY = {t[0]: t for t in TARGETS}
 TARGET_SIZES = {"prepare_11k_s": 11_000, "prepare_100k_s": 100_000, "prepare_1M_s": 1_000_000}
@@ -246,7 +247,16 @@ def bench_network(r, target, frames, source_neutral, weights, repeats: int) -> d
                          w_list, repeats),
         "invert": _rate(lambda f: r.invert(f, source_neutral=source_neutral),
                         lambda: r.invert(frames, source_neutral=source_neutral), frames, repeats),
+        "invert_no_neutral": _rate(r.invert, lambda: r.invert(frames), frames, repeats),
     }
+    r._source_rigs.clear()                                  # a cold bake of the source's rig
+    source_bake_s, _ = median_time(lambda: r.source_rig(source_neutral), 1)
+    out["invert_refine"] = {
+        **_rate(lambda f: r.invert(f, source_neutral=source_neutral, refine=True),
+                lambda: r.invert(frames, source_neutral=source_neutral, refine=True), frames, repeats),
+        "source_bake_s": source_bake_s}
+    out["invert_refine"]["added_ms"] = (out["invert_refine"]["latency_ms"]
+                                        - out["invert"]["latency_ms"])
     bake_s, _ = median_time(lambda: r.bake(target), 1)
     baked = r.bake(target)
     out["baked"] = {**_rate(baked.evaluate, lambda: baked.evaluate(weights), w_list, repeats),
@@ -363,6 +373,8 @@ def check_targets(results: dict) -> list[dict]:
         measured[("animate_fps", device)] = m["animate"]["throughput_fps"]
         measured[("baked_fps", device)] = m["baked"]["throughput_fps"]
         measured[("invert_fps", device)] = m["invert"]["throughput_fps"]
+        if "invert_refine" in m:
+            measured[("refine_added_ms", device)] = m["invert_refine"]["added_ms"]
     out = []
     for key, what, op, limit, unit in TARGETS:
         for (k, device), value in measured.items():
@@ -404,7 +416,9 @@ def to_markdown(results: dict) -> str:
                    f"latency = median single-frame call, throughput = one batched call)\n")
         rows = []
         floor = fr["floor_linear_blendshapes"]
-        for op in ("transfer", "animate", "baked", "invert"):
+        for op in ("transfer", "animate", "baked", "invert", "invert_no_neutral", "invert_refine"):
+            if op not in fr["model"]:                       # results of an older version
+                continue
             m, p = fr["model"][op], fr["peer_no_skinning"][op]
             rows.append([op, fmt(m["latency_ms"]), fmt(m["throughput_fps"]), fmt(p["latency_ms"]),
                          fmt(p["throughput_fps"]), fmt(m["throughput_fps"] / p["throughput_fps"]),
@@ -417,6 +431,12 @@ def to_markdown(results: dict) -> str:
         out.append(f"Baking the rig (53 decoded shapes): {fmt(baked['bake_s'])} s; the baked rig "
                    f"differs from the full decoder by an MSE of {fmt(baked['vs_full_decoder_mse_mm2'])} "
                    f"mm² on the same weights.\n")
+        if "invert_refine" in fr["model"]:
+            ref = fr["model"]["invert_refine"]
+            out.append(f"Inversion modes: invert = with the source neutral, invert_no_neutral = "
+                       f"without, invert_refine = with it plus analysis-by-synthesis; baking the "
+                       f"source's rig once: {fmt(ref['source_bake_s'])} s, then refine adds "
+                       f"{fmt(ref['added_ms'])} ms a frame (latency difference).\n")
         missed = {t["target"] for t in results.get("targets", []) if t["device"] == device and not t["met"]}
         for op in [op for op in ("transfer", "animate", "invert") if f"{op}_fps" in missed]:
             out.append(_profile_table(f"{op}, one frame", fr["model"][op]["profile_by_own_time"]))
