@@ -104,35 +104,40 @@ class SourceRig:
     """The decoder's own rig on a source neutral, for analysis-by-synthesis (``Retargeter.refine``).
 
     target: the source neutral prepared as a target; baked: its 53 decoded one-hot shapes (source
-    units); chol: (53,53) upper-triangular R with RᵀR = AᵀA + λI, A = (3V,53) the baked deltas and
-    λ = ``prior`` · mean diag(AᵀA), the pull towards the encoder's estimate. Made once per neutral.
+    units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; chol: (53,53) upper-triangular R
+    with RᵀR = AᵀA + λI and λ = ``prior`` · mean diag(AᵀA), the pull towards the encoder's
+    estimate. Made once per neutral.
     """
 
     target: Target
     baked: BakedRig
+    basis: np.ndarray
     chol: np.ndarray
     ridge: float
 
     @classmethod
     def make(cls, target: Target, baked: BakedRig, prior: float) -> "SourceRig":
-        a = baked.deltas.reshape(N_FACS, -1).astype(np.float64)           # Aᵀ (53, 3V)
-        gram = a @ a.T
+        a = np.ascontiguousarray(baked.deltas.reshape(N_FACS, -1), np.float32)   # Aᵀ (53, 3V)
+        gram = a.astype(np.float64) @ a.T.astype(np.float64)
         ridge = prior * float(np.trace(gram)) / N_FACS + 1e-12
-        return cls(target, baked, np.linalg.cholesky(gram + ridge * np.eye(N_FACS)).T, ridge)
+        return cls(target, baked, a, np.linalg.cholesky(gram + ridge * np.eye(N_FACS)).T, ridge)
 
     def fit(self, frame: np.ndarray, w0: np.ndarray) -> np.ndarray:
         """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|²: frame
         (V,3) in the source's units, w0 (53,) the encoder's estimate. Bounded least squares
         (``scipy.optimize.lsq_linear``, BVLS) on the 53×53 reduced system R w ≈ R⁻ᵀ (Aᵀb + λ w0),
         which has the same minimiser as the full (3V+53)-row problem; the problem is convex, so the
-        estimate enters as the prior, not as a starting point."""
+        estimate enters as the prior, not as a starting point. When the unconstrained minimiser
+        lies in [0,1] it is the answer and BVLS is skipped."""
         from scipy.linalg import solve_triangular
         from scipy.optimize import lsq_linear
 
-        b = (np.asarray(frame, np.float64) - self.baked.neutral).reshape(-1)
-        h = self.baked.deltas.reshape(N_FACS, -1).astype(np.float64) @ b + self.ridge * w0
+        b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
+        h = (self.basis @ b).astype(np.float64) + self.ridge * w0
         rhs = solve_triangular(self.chol, h, trans="T")
-        w = lsq_linear(self.chol, rhs, bounds=(0.0, 1.0), method="bvls").x
+        w = solve_triangular(self.chol, rhs)
+        if w.min() < 0.0 or w.max() > 1.0:
+            w = lsq_linear(self.chol, rhs, bounds=(0.0, 1.0), method="bvls").x
         return np.clip(w, 0.0, 1.0).astype(np.float32)       # BVLS may overstep a bound by 1 ulp
 
 
