@@ -626,15 +626,16 @@ def write_heatmaps(samples, out_dir, vmax_mm: float, size: int = 256) -> list[Pa
 
 
 # ------------------------------------------------------------------------------------- CLI helpers
-def network_methods(checkpoints, modes, device=None) -> list[NetworkMethod]:
+def network_methods(checkpoints, modes, device=None, refine_steps: int = 0) -> list[NetworkMethod]:
     """One method per (checkpoint, neutral mode): checkpoints [(name, path)], modes a list of
     ``NEUTRAL_MODES`` keys. Rows are named NAME, or "NAME (MODE)" unless the only mode is the
-    default "neutral"; the modes of a checkpoint share one model and its prepared targets."""
+    default "neutral"; the modes of a checkpoint share one model and its prepared targets.
+    ``refine_steps``: ``Retargeter.refine_steps`` of the "refine" mode."""
     from .api import Retargeter
 
     out = []
     for name, path in checkpoints:
-        r, targets = Retargeter.load(path, device=device), {}
+        r, targets = Retargeter.load(path, device=device, refine_steps=refine_steps), {}
         for mode in modes:
             label = name if list(modes) == ["neutral"] else f"{name} ({NEUTRAL_MODES[mode]})"
             out.append(NetworkMethod(label, r, mode, targets))

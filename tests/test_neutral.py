@@ -234,3 +234,10 @@ def test_eval_neutral_modes_make_a_row_each(files, tmp_path):
     inverse = res["suites"]["inverse"]["methods"]
     assert set(inverse) == rows and all(0 <= m["weight_mae"] <= 1 for m in inverse.values())
     assert inverse["n (no neutral)"]["weight_mae"] != inverse["n (neutral)"]["weight_mae"]
+
+
+def test_eval_refuses_negative_refine_steps(files, tmp_path, capsys):
+    assert main(["eval", "--config", str(TINY_EVAL), "--checkpoint", str(files / "tiny.pt"),
+                 "--suite", "inverse", "--neutral-modes", "refine", "--refine-steps", "-2",
+                 "--no-oracle", "--no-progress", "--device", "cpu"]) == 2
+    assert capsys.readouterr().err.strip() == "error: --refine-steps must be >= 0, got -2"

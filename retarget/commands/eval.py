@@ -22,6 +22,8 @@ def add_arguments(p):
                    metavar="MODE", help="a row per checkpoint and mode: none (the source's neutral "
                    "not given), neutral (given: the default), refine (given, plus "
                    "analysis-by-synthesis on the source's baked rig)")
+    p.add_argument("--refine-steps", type=int, default=0, metavar="N",
+                   help="mode refine: then N gradient steps on the free dims of z_GE (default 0)")
     p.add_argument("--config", help="eval config overriding configs/eval/default.yaml "
                                     "(fixed seeds and sizes)")
     p.add_argument("--out", help="folder for eval.json and eval.md")
@@ -52,6 +54,8 @@ def run(args) -> int:
         for path in write_results(args.out, "eval", results, markdown) if args.out else ():
             print(f"wrote {path}")
         return 0
+    from ..errors import RetargetError
+
     cfg = load_eval_config(args.config)
     suites = list(args.suite or SUITES)
     if args.real_rig:
@@ -62,7 +66,10 @@ def run(args) -> int:
               f"(pass --real-rig RIG.npz to run it)")
         suites.remove("real_rig")
     checkpoints = parse_checkpoints(args.checkpoint)
-    methods = network_methods(checkpoints, list(dict.fromkeys(args.neutral_modes)), args.device)
+    if args.refine_steps < 0:
+        raise RetargetError(f"--refine-steps must be >= 0, got {args.refine_steps}")
+    methods = network_methods(checkpoints, list(dict.fromkeys(args.neutral_modes)), args.device,
+                              args.refine_steps)
     if not args.no_oracle:
         methods.append(OracleMethod())
     evaluation = Evaluation(cfg, methods, progress=not args.no_progress)
