@@ -73,6 +73,7 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
     for op in ("invert_no_neutral", "invert_refine"):
         assert fr["model"][op]["latency_ms"] > 0 and fr["model"][op]["throughput_fps"] > 0
     assert fr["model"]["invert_refine"]["source_bake_s"] > 0
+    assert fr["model"]["invert_refine"]["added_ms_10_steps"] > fr["model"]["invert_refine"]["added_ms"]
     assert res["train"]["samples_per_s"] > 0 and res["train"]["steps_timed"] == 2
     without = {w["trick"]: w["samples_per_s"] for w in res["train"]["without"]}
     assert len(without) == 3 and all(v > 0 for v in without.values())
