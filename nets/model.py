@@ -60,6 +60,11 @@ def _expected(name: str, kind: str) -> str:
         return f"an int in {MIN_CONFIG_VALUES.get(name, 1)}..{MAX_CONFIG_VALUES[name]}"
     return f"a {kind}"
 
+#: Extra per-vertex inputs of the neutral-aware expression encoder (``NFSConfig.neutral_channels``):
+#: displacement from the source's neutral (3, canonical units), change of the unit vertex normal (3),
+#: and a flag that is 1 when no neutral was given (then the other six are 0).
+NEUTRAL_CHANNEL_DIM = 7
+
 
 @dataclass(frozen=True)
 class NFSConfig:
@@ -92,6 +97,10 @@ class NFSConfig:
         decoder_fourier: octaves of Fourier features sin/cos(2^k π x / 8), k < decoder_fourier, of
             the canonical position (a 16-unit-wide head) added to the basis decoder's input; 0 =
             none. Only the basis decoder reads it.
+        neutral_channels: beyond the paper: the expression encoder also takes, per source vertex,
+            its displacement from the source's neutral and the change of its normal, or zeros and
+            a flag channel when the neutral is unknown (``NEUTRAL_CHANNEL_DIM``). False = the
+            paper's encoder (and every checkpoint saved before the field existed).
     """
 
     code_dim: int = 128
@@ -114,6 +123,7 @@ class NFSConfig:
     canonical: str = "bbox"
     decoder: str = "mlp"
     decoder_fourier: int = 0
+    neutral_channels: bool = False
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -264,8 +274,9 @@ class NFSModel(nn.Module):
                               cfg.norm_groups)
         self.identity_encoder = DiffusionNet(c_in, cfg.code_dim, cfg.enc_width, cfg.enc_blocks,
                                              cfg.dropout, outputs="global_mean")
-        self.expression_encoder = DiffusionNet(c_in, cfg.code_dim, cfg.enc_width, cfg.enc_blocks,
-                                               cfg.dropout, outputs="global_mean")
+        self.expression_encoder = DiffusionNet(
+            c_in + NEUTRAL_CHANNEL_DIM * cfg.neutral_channels, cfg.code_dim, cfg.enc_width,
+            cfg.enc_blocks, cfg.dropout, outputs="global_mean")
         if cfg.use_skinning:
             self.skinning_encoder = DiffusionNet(c_in, cfg.n_segments, cfg.enc_width,
                                                  cfg.enc_blocks, cfg.dropout, outputs="vertices",
@@ -303,13 +314,32 @@ class NFSModel(nn.Module):
         """Identity encoder on a neutral mesh -> z_ID (code_dim,) (area-weighted vertex mean)."""
         return self.identity_encoder(self._encoder_input(feat, c), ops)
 
-    def encode_expression(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
+    def encode_expression(self, feat: torch.Tensor, c: torch.Tensor, ops,
+                          neutral: torch.Tensor | None = None) -> torch.Tensor:
         """Expression encoder on an expression mesh -> z_GE (code_dim,); z_GE[:53] = FACS weights.
 
         ``c`` is the image code of the mesh's *neutral* render and ``ops`` may be the neutral's
-        operators, as in the paper.
+        operators, as in the paper. ``neutral``: (V, NEUTRAL_CHANNEL_DIM) channels relative to the
+        source's neutral (``retarget.prepare.neutral_channels``), or None when it is unknown; used
+        only by a model with ``cfg.neutral_channels`` (ignored otherwise).
         """
-        return self.expression_encoder(self._encoder_input(feat, c), ops)
+        return self.expression_encoder(self.expression_input(feat, c, neutral), ops)
+
+    def expression_input(self, feat: torch.Tensor, c: torch.Tensor,
+                         neutral: torch.Tensor | None = None) -> torch.Tensor:
+        """The expression encoder's per-vertex input: [v, c] (V, 6 + image_code_dim), and with
+        ``cfg.neutral_channels`` the neutral channels after them (zeros and flag 1 when ``neutral``
+        is None) -> (V, 6 + image_code_dim + NEUTRAL_CHANNEL_DIM)."""
+        x = self._encoder_input(feat, c)
+        if not self.cfg.neutral_channels:
+            return x
+        if neutral is None:
+            neutral = feat.new_zeros(feat.shape[0], NEUTRAL_CHANNEL_DIM)
+            neutral[:, -1] = 1.0
+        elif neutral.shape != (feat.shape[0], NEUTRAL_CHANNEL_DIM):
+            raise ValueError(f"neutral channels must be ({feat.shape[0]}, {NEUTRAL_CHANNEL_DIM}); "
+                             f"got {tuple(neutral.shape)}")
+        return torch.cat([x, neutral], dim=1)
 
     def encode_skinning(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
         """Skinning encoder on a neutral mesh -> z_Skin (V, L) in (0, 1) (sigmoid, for eq. 2 BCE)."""

@@ -6,6 +6,8 @@
     verts = r.transfer(load_mesh("src_frame.obj"), tgt)   # (V_tgt, 3) in target units
     verts_seq = r.animate(tgt, [{"jawOpen": 1.0}, {"jawOpen": 0.5}])   # or a (T, 53) array
     w = r.invert(load_mesh("frame.obj"))       # (53,) FACS weights in ICT order
+    neutral = load_mesh("actor_neutral.obj")  # the performer's neutral, when you have it:
+    w = r.invert(load_mesh("frame.obj"), source_neutral=neutral, refine=True)  # fitted on its rig
 
 Every mesh is canonicalised on the way in (centred, scaled to a 16-unit-wide head) and results are
 mapped back to the target's own frame and units. Meshes above ``proxy_vertices`` (targets and source
@@ -42,7 +44,7 @@ from .checkpoint import load_checkpoint, model_from_checkpoint
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
 from .mesh import Mesh, as_mesh, is_mesh_like
-from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh, vertex_features
+from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh, vertex_features
 from .smoothing import smooth_codes
 
 DEFAULT_CHECKPOINT = "default.pt"
@@ -136,6 +138,48 @@ def _digest(array: np.ndarray) -> str:
     return hashlib.blake2b(np.ascontiguousarray(array).tobytes(), digest_size=16).hexdigest()
 
 
+@dataclass
+class SourceRig:
+    """The decoder's own rig on a source neutral, for analysis-by-synthesis (``Retargeter.refine``).
+
+    target: the source neutral prepared as a target; baked: its 53 decoded one-hot shapes (source
+    units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; chol: (53,53) upper-triangular R
+    with RᵀR = AᵀA + λI and λ = ``prior`` · mean diag(AᵀA), the pull towards the encoder's
+    estimate. Made once per neutral.
+    """
+
+    target: Target
+    baked: BakedRig
+    basis: np.ndarray
+    chol: np.ndarray
+    ridge: float
+
+    @classmethod
+    def make(cls, target: Target, baked: BakedRig, prior: float) -> "SourceRig":
+        a = np.ascontiguousarray(baked.deltas.reshape(N_FACS, -1), np.float32)   # Aᵀ (53, 3V)
+        gram = a.astype(np.float64) @ a.T.astype(np.float64)
+        ridge = prior * float(np.trace(gram)) / N_FACS + 1e-12
+        return cls(target, baked, a, np.linalg.cholesky(gram + ridge * np.eye(N_FACS)).T, ridge)
+
+    def fit(self, frame: np.ndarray, w0: np.ndarray) -> np.ndarray:
+        """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|²: frame
+        (V,3) in the source's units, w0 (53,) the encoder's estimate. Bounded least squares
+        (``scipy.optimize.lsq_linear``, BVLS) on the 53×53 reduced system R w ≈ R⁻ᵀ (Aᵀb + λ w0),
+        which has the same minimiser as the full (3V+53)-row problem; the problem is convex, so the
+        estimate enters as the prior, not as a starting point. When the unconstrained minimiser
+        lies in [0,1] it is the answer and BVLS is skipped."""
+        from scipy.linalg import solve_triangular
+        from scipy.optimize import lsq_linear
+
+        b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
+        h = (self.basis @ b).astype(np.float64) + self.ridge * w0
+        rhs = solve_triangular(self.chol, h, trans="T")
+        w = solve_triangular(self.chol, rhs)
+        if w.min() < 0.0 or w.max() > 1.0:
+            w = lsq_linear(self.chol, rhs, bounds=(0.0, 1.0), method="bvls").x
+        return np.clip(w, 0.0, 1.0).astype(np.float32)       # BVLS may overstep a bound by 1 ulp
+
+
 class Retargeter:
     """Expression cloning, driving from FACS weights and inverse rigging with one NFS model.
 
@@ -144,8 +188,16 @@ class Retargeter:
     source topologies whose operators are kept in memory across calls (``encode``; 0 = none).
     """
 
+    #: Analysis-by-synthesis (``refine``): weight of the pull towards the encoder's estimate,
+    #: relative to the mean squared norm of the baked shapes; source rigs kept baked; vertices
+    #: decoded per gradient step of the free-dims refinement.
+    REFINE_PRIOR = 1e-3
+    SOURCE_RIGS_KEPT = 8
+    REFINE_ROWS = 2000
+
     def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
-                 chunk: int = 16384, cache_dir=None, source_cache_size: int = 8):
+                 chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
+                 refine_steps: int = 0):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
@@ -154,6 +206,8 @@ class Retargeter:
         self.cache_dir = cache_dir
         self.source_cache_size = int(source_cache_size)
         self._sources: OrderedDict[tuple, SourceTopology] = OrderedDict()
+        self.refine_steps = refine_steps   # gradient steps on the free dims of z_GE after the fit
+        self._source_rigs: dict[str, SourceRig] = {}
 
     @classmethod
     def load(cls, path=None, device=None, **kwargs) -> "Retargeter":
@@ -224,7 +278,7 @@ class Retargeter:
         if ref.n_vertices > self.proxy_vertices:
             (_, faces), cluster = cluster_decimate(ref.vertices, ref.faces, self.proxy_vertices)
         pv = ref.vertices if cluster is None else cluster_means(ref.vertices, cluster)
-        canon = Canonicaliser.fit(pv, name=ref.name or "source")
+        canon = Canonicaliser.fit(pv, name=ref.name or "source", kind=self.cfg.canonical, faces=faces)
         ops = load_or_compute_operators(canon.to_canonical(pv).astype(np.float32), faces,
                                         self.cfg.k_eig, cache_dir=self.cache_dir)
         src = SourceTopology(faces, cluster, canon, ops, ops.to_torch(self.device))
@@ -265,7 +319,11 @@ class Retargeter:
         check_head_like(ref, "source")
         src = self.source_topology(ref, neutral=neutral is not None)
         canon = src.canon if neutral is not None else Canonicaliser.fit(
-            src.proxy(ref).vertices, name=ref.name or "source")
+            src.proxy(ref).vertices, name=ref.name or "source", kind=self.cfg.canonical,
+            faces=src.faces)
+        use_neutral = self.cfg.neutral_channels and neutral is not None
+        # the neutral in its own canonical frame: the reference of the encoder's neutral channels
+        base = canon.to_canonical(src.proxy(neutral).vertices).astype(np.float32) if use_neutral else None
         codes = []
         for f in tqdm(frames, desc="encoding", unit="frame", disable=not progress or len(frames) < 2):
             if f.n_vertices != ref.n_vertices:
@@ -274,16 +332,80 @@ class Retargeter:
             p = self._prepare(src.proxy(f), canon=canon, ops=src.ops)
             feat = torch.from_numpy(p.feat).to(self.device)
             img = torch.from_numpy(p.image)[None].to(self.device)
-            codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], src.ops_t))
+            channels = (torch.from_numpy(neutral_channels(p.vertices, base, p.faces))
+                        .to(self.device) if use_neutral else None)
+            codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], src.ops_t,
+                                                      channels))
         out = torch.stack(codes).cpu().numpy()
         return out[0] if single else out
 
     def invert(self, frames, source_neutral: Mesh | None = None, smooth: str | None = None,
-               fps: float = 30.0, progress: bool = False) -> np.ndarray:
+               fps: float = 30.0, progress: bool = False, refine: bool = False) -> np.ndarray:
         """Inverse rigging: frame(s) -> FACS weights (53,) or (T,53) in ICT order, clipped to [0,1].
-        ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames."""
-        z = self.expression_codes(frames, source_neutral, smooth, fps, progress)
+        ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames.
+        ``refine``: analysis-by-synthesis on the source's own baked rig (needs ``source_neutral``;
+        see ``refine``)."""
+        z = self.expression_codes(frames, source_neutral, smooth, fps, progress, refine)
         return np.clip(z[..., :N_FACS], 0.0, 1.0).astype(np.float32)
+
+    # --------------------------------------------------------------------------- analysis by synthesis
+    def source_rig(self, source_neutral: Mesh) -> SourceRig:
+        """The 53 one-hot shapes decoded on ``source_neutral`` and their factorised normal equations,
+        made once per neutral (cached by content, the last ``SOURCE_RIGS_KEPT``)."""
+        import hashlib
+
+        key = hashlib.sha1(np.ascontiguousarray(source_neutral.vertices, np.float64).tobytes()
+                           + np.ascontiguousarray(source_neutral.faces, np.int64).tobytes()).hexdigest()
+        if key not in self._source_rigs:
+            target = self.prepare(source_neutral)
+            while len(self._source_rigs) >= self.SOURCE_RIGS_KEPT:
+                self._source_rigs.pop(next(iter(self._source_rigs)))
+            self._source_rigs[key] = SourceRig.make(target, self.bake(target), self.REFINE_PRIOR)
+        return self._source_rigs[key]
+
+    def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray) -> np.ndarray:
+        """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
+        ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
+        weights z_GE[:53] as the prior (``SourceRig.fit``); the code becomes [w, 0] and, with
+        ``refine_steps`` > 0, its free dims are then fitted by that many Adam steps through the
+        decoder on the source neutral (``REFINE_ROWS`` fixed vertices). frames: a Mesh or a list
+        sharing the neutral's topology; z_ge (128,) or (T,128) -> the same shape, float32."""
+        if source_neutral is None:
+            raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
+                                "--source-neutral on the command line)")
+        frames = [frames] if isinstance(frames, Mesh) else list(frames)
+        z = np.asarray(z_ge, np.float32).reshape(len(frames), -1)
+        rig = self.source_rig(source_neutral)
+        out = np.zeros_like(z)
+        for i, frame in enumerate(frames):
+            out[i, :N_FACS] = rig.fit(frame.vertices, np.clip(z[i, :N_FACS], 0.0, 1.0))
+            if self.refine_steps > 0:
+                out[i, N_FACS:] = self._refine_free_dims(rig, frame.vertices, out[i, :N_FACS])
+        return out.reshape(np.shape(z_ge))
+
+    def _refine_free_dims(self, rig: SourceRig, frame: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """The free dims f of z_GE = [w, f] (f from 0) after ``refine_steps`` Adam steps on the
+        canonical squared error of the decoded source neutral against ``frame`` (V,3), on up to
+        ``REFINE_ROWS`` vertices -> (code_dim − 53,) float32."""
+        t = rig.target
+        n = t.n_vertices
+        rows = (np.random.default_rng(0).choice(n, self.REFINE_ROWS, replace=False)
+                if n > self.REFINE_ROWS else np.arange(n))
+        goal = torch.from_numpy(t.proxy.canon.displacement_to_canonical(
+            frame[rows] - t.mesh.vertices[rows]).astype(np.float32)).to(self.device)
+        rows_t = torch.from_numpy(rows).to(self.device)
+        w_t = torch.from_numpy(w).to(self.device)
+        free = torch.zeros(self.cfg.code_dim - N_FACS, device=self.device, requires_grad=True)
+        opt = torch.optim.Adam([free], lr=0.05)
+        with torch.enable_grad():
+            for _ in range(self.refine_steps):
+                dv = self.model.decode_target(t.feat, t.c, t.codes, torch.cat([w_t, free]), rows_t)
+                loss = (dv - goal).square().sum(-1).mean()
+                opt.zero_grad(set_to_none=True)
+                (grad,) = torch.autograd.grad(loss, free)
+                free.grad = grad
+                opt.step()
+        return free.detach().cpu().numpy()
 
     # --------------------------------------------------------------------------- decoding
     def decode(self, target, z_ge, progress: bool = False) -> np.ndarray:
@@ -311,20 +433,25 @@ class Retargeter:
 
     def expression_codes(self, source, source_neutral: Mesh | None = None,
                          smooth: str | None = None, fps: float = 30.0,
-                         progress: bool = False) -> np.ndarray:
-        """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), temporally
-        filtered when ``smooth`` is given (see ``invert``)."""
+                         progress: bool = False, refine: bool = False) -> np.ndarray:
+        """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), refined by
+        analysis-by-synthesis when ``refine`` (``refine``), temporally filtered when ``smooth`` is
+        given (see ``invert``)."""
         z = self.encode(source, source_neutral, progress)
+        if refine:
+            z = self.refine(source, source_neutral, z)
         if smooth and z.ndim == 2:
             z = smooth_codes(z, smooth, fps)
         return z
 
     def transfer(self, source, target, source_neutral: Mesh | None = None,
-                 smooth: str | None = None, fps: float = 30.0, progress: bool = False) -> np.ndarray:
+                 smooth: str | None = None, fps: float = 30.0, progress: bool = False,
+                 refine: bool = False) -> np.ndarray:
         """Clone the expression of source frame(s) onto a target neutral mesh (any topology).
-        source: a Mesh or a list of frames -> (V_tgt,3) or (T,V_tgt,3) in the target's units."""
-        return self.decode(target, self.expression_codes(source, source_neutral, smooth, fps, progress),
-                           progress)
+        source: a Mesh or a list of frames -> (V_tgt,3) or (T,V_tgt,3) in the target's units.
+        ``refine``: codes from analysis-by-synthesis on the source (needs ``source_neutral``)."""
+        return self.decode(target, self.expression_codes(source, source_neutral, smooth, fps, progress,
+                                                         refine), progress)
 
     def animate(self, target, weights, progress: bool = False) -> np.ndarray:
         """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list

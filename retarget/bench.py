@@ -12,7 +12,7 @@ Sections (each figure the median of several runs; devices: the CPU, and CUDA whe
 - ``frames``: per-call latency (median of single-frame calls after a warm-up call) and batched
   throughput (frames / wall time of one call over all frames, median of ``repeats``) of transfer,
   animate (full decoder), the baked rig (``Retargeter.bake``) and invert on an 11k-vertex target.
-  Transfer and invert take the source frames as a user streaming them would: no ``source_neutral``,
+  Transfer and ``invert_no_neutral`` take the source frames as a user streaming them would: no ``source_neutral``,
   so each single-frame call finds its topology's operators in the Retargeter's source cache (filled
   by the warm-up call; ``Retargeter.source_topology``). The floor is
   linear blendshape evaluation (numpy, neutral + w·deltas) of the target's procedural rig, the peer
@@ -21,13 +21,16 @@ Sections (each figure the median of several runs; devices: the CPU, and CUDA whe
   other decoder (``model.decoder`` "mlp" or "basis", the same config otherwise, untrained) is timed
   the same way, with the warm preparation of the target (operators computed, no cache), so the
   table by decoder gives each decoder's per-frame and preparation cost.
+  Invert is timed with the source's neutral, without it, and with analysis-by-synthesis
+  (``refine=True``): the one-off bake of the source's rig, and what ``Retargeter.refine`` adds per
+  frame once it is baked.
 - ``train``: training samples/s of a config (``Trainer``, ``log_every`` 1, median over steps after
   the first). The pool is shrunk to 2 identities and validation to 1 so that target preparation,
   which real runs amortise over ``pool_refresh`` steps, is not timed.
 
 Targets (``TARGETS``): prepare 11k ≤ 2 s, 100k ≤ 15 s, 1M ≤ 120 s at ≤ 8 GB; animate (full network)
 (and transfer) ≥ 5 frames/s and baked rig ≥ 60 frames/s at 11k vertices; invert ≥ 10
-frames/s; transfer ≥ 5 and invert ≥ 10 frames/s also per single-frame call. Every network operation is also run once under cProfile; the markdown shows where the
+frames/s; transfer ≥ 5 and invert ≥ 10 frames/s also per single-frame call; refine ≤ 20 ms a frame after the bake. Every network operation is also run once under cProfile; the markdown shows where the
 time goes for each missed target.
 """
 from __future__ import annotations
@@ -66,10 +69,12 @@ TARGETS = (  # (key, measured quantity, op, threshold, unit)
     ("invert_fps", "invert, 11k", ">=", 10.0, "frames/s"),
     ("transfer_call_fps", "transfer, one frame per call, 11k", ">=", 5.0, "frames/s"),
     ("invert_call_fps", "invert, one frame per call, 11k", ">=", 10.0, "frames/s"),
+    ("refine_added_ms", "refine: added per frame after the bake, 11k", "<=", 20.0, "ms"),
 )
 TARGETS_BY_KEY = {t[0]: t for t in TARGETS}
 TARGET_SIZES = {"prepare_11k_s": 11_000, "prepare_100k_s": 100_000, "prepare_1M_s": 1_000_000}
 FRAME_TARGET_SIZE = 11_000  # the per-frame targets hold for this target size
+REFINE_STEPS = 10           # gradient steps on the free dims of z_GE timed beside the plain refine
 
 
 # ------------------------------------------------------------------------------------- meshes
@@ -240,11 +245,12 @@ def _rate(fn_single, fn_batch, items, repeats: int) -> dict:
     return {"latency_ms": 1000 * lat, "throughput_fps": throughput(fn_batch, len(items), repeats)}
 
 
-def bench_network(r, target, frames, weights, repeats: int) -> dict:
+def bench_network(r, target, frames, source_neutral, weights, repeats: int) -> dict:
     """Latency and throughput of transfer / animate / baked rig / invert with one Retargeter.
 
-    frames: list of source meshes of one topology, given without a source neutral (the source
-    cache starts empty; the warm-up call fills it); weights (T,53).
+    frames: list of source meshes of one topology, given without a source neutral to transfer and
+    invert_no_neutral (the source cache starts empty; the warm-up call fills it) and with
+    ``source_neutral`` (their topology) to invert and invert_refine; weights (T,53).
     """
     w_list = list(weights)
     r.clear_source_cache()
@@ -253,9 +259,24 @@ def bench_network(r, target, frames, weights, repeats: int) -> dict:
                           frames, repeats),
         "animate": _rate(lambda w: r.animate(target, w), lambda: r.animate(target, weights),
                          w_list, repeats),
-        "invert": _rate(r.invert, lambda: r.invert(frames), frames, repeats),
+        "invert": _rate(lambda f: r.invert(f, source_neutral=source_neutral),
+                        lambda: r.invert(frames, source_neutral=source_neutral), frames, repeats),
+        "invert_no_neutral": _rate(r.invert, lambda: r.invert(frames), frames, repeats),
     }
     out["prepare_s"], _ = median_time(lambda: r.prepare(target.mesh), repeats)
+    r._source_rigs.clear()                                  # a cold bake of the source's rig
+    source_bake_s, _ = median_time(lambda: r.source_rig(source_neutral), 1)
+    out["invert_refine"] = {
+        **_rate(lambda f: r.invert(f, source_neutral=source_neutral, refine=True),
+                lambda: r.invert(frames, source_neutral=source_neutral, refine=True), frames, repeats),
+        "source_bake_s": source_bake_s}
+    codes = [r.encode(f, source_neutral=source_neutral) for f in frames]  # refine's own cost:
+    out["invert_refine"]["added_ms"] = 1000 * latency(                     # the fit, bake reused
+        lambda i: r.refine(frames[i], source_neutral, codes[i]), list(range(len(frames))))
+    steps, r.refine_steps = r.refine_steps, REFINE_STEPS               # and with the free dims fitted
+    out["invert_refine"][f"added_ms_{REFINE_STEPS}_steps"] = 1000 * latency(
+        lambda i: r.refine(frames[i], source_neutral, codes[i]), list(range(len(frames))))
+    r.refine_steps = steps
     bake_s, _ = median_time(lambda: r.bake(target), 1)
     baked = r.bake(target)
     out["baked"] = {**_rate(baked.evaluate, lambda: baked.evaluate(weights), w_list, repeats),
@@ -294,13 +315,14 @@ def bench_frames(checkpoint, device: str, n_vertices: int, n_frames: int, repeat
     rig_t = build_rig(sample_identity(0, split="test"), tess)       # target identity
     rig_s = build_rig(sample_identity(1, split="test"), tess)       # source identity
     weights = sample_weights(np.random.default_rng(0), n_frames, "mixed").astype(np.float32)
+    source_neutral = Mesh(rig_s.neutral, rig_s.faces, "source")
     frames = [Mesh(f, rig_s.faces, "frame") for f in rig_s.evaluate(weights)]
     target_mesh = Mesh(rig_t.neutral, rig_t.faces, "target")
     out = {"n_vertices": len(rig_t.neutral), "frames": n_frames, "decoder": net.cfg.decoder,
            "other_decoder_name": other}
     for name, r in (("model", net), ("peer_no_skinning", peer_r), ("other_decoder", other_r)):
         target = r.prepare(target_mesh)
-        out[name] = bench_network(r, target, frames, weights, repeats)
+        out[name] = bench_network(r, target, frames, source_neutral, weights, repeats)
     out["floor_linear_blendshapes"] = _rate(rig_t.evaluate, lambda: rig_t.evaluate(weights),
                                             list(weights), repeats)
     return out
@@ -374,7 +396,9 @@ def check_targets(results: dict) -> list[dict]:
         measured[("baked_fps", device)] = m["baked"]["throughput_fps"]
         measured[("invert_fps", device)] = m["invert"]["throughput_fps"]
         measured[("transfer_call_fps", device)] = 1000.0 / m["transfer"]["latency_ms"]
-        measured[("invert_call_fps", device)] = 1000.0 / m["invert"]["latency_ms"]
+        measured[("invert_call_fps", device)] = 1000.0 / m["invert_no_neutral"]["latency_ms"]
+        if "invert_refine" in m:
+            measured[("refine_added_ms", device)] = m["invert_refine"]["added_ms"]
     out = []
     for key, what, op, limit, unit in TARGETS:
         for (k, device), value in measured.items():
@@ -417,7 +441,9 @@ def to_markdown(results: dict) -> str:
                    f"sources without source_neutral)\n")
         rows = []
         floor = fr["floor_linear_blendshapes"]
-        for op in ("transfer", "animate", "baked", "invert"):
+        for op in ("transfer", "animate", "baked", "invert", "invert_no_neutral", "invert_refine"):
+            if op not in fr["model"]:                       # results of an older version
+                continue
             m, p = fr["model"][op], fr["peer_no_skinning"][op]
             rows.append([op, fmt(m["latency_ms"]), fmt(1000.0 / m["latency_ms"]),
                          fmt(m["throughput_fps"]), fmt(p["latency_ms"]), fmt(p["throughput_fps"]),
@@ -443,6 +469,14 @@ def to_markdown(results: dict) -> str:
                   fmt(m["baked"]["throughput_fps"]), fmt(m["baked"]["vs_full_decoder_mse_mm2"])]
                  for d, m in ((fr["decoder"], fr["model"]),
                               (fr["other_decoder_name"], fr["other_decoder"]))]) + "\n")
+        if "invert_refine" in fr["model"]:
+            ref = fr["model"]["invert_refine"]
+            out.append(f"Inversion modes: invert = with the source neutral, invert_no_neutral = "
+                       f"without, invert_refine = with it plus analysis-by-synthesis; baking the "
+                       f"source's rig once: {fmt(ref['source_bake_s'])} s, then refine adds "
+                       f"{fmt(ref['added_ms'])} ms a frame (median of Retargeter.refine alone), "
+                       f"{fmt(ref.get(f'added_ms_{REFINE_STEPS}_steps'))} ms with "
+                       f"{REFINE_STEPS} gradient steps on the free dims.\n")
         missed = {t["target"] for t in results.get("targets", []) if t["device"] == device and not t["met"]}
         for op in [op for op in ("transfer", "animate", "invert")
                    if {f"{op}_fps", f"{op}_call_fps"} & missed]:

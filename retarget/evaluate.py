@@ -91,6 +91,10 @@ DO_NOTHING_NAME = "do nothing"
 CLOSEST_POINT_NAME = "closest point"
 #: Rows that depend only on the eval config, in table order around the checkpoints' rows.
 BASELINES_FIRST, BASELINES_LAST = (DO_NOTHING_NAME,), (CLOSEST_POINT_NAME, ORACLE_NAME)
+#: How a checkpoint is given the source (``retarget eval --neutral-modes``): without its neutral
+#: (frames canonicalised on the first), with it (the default: canonical frame, operators and, for a
+#: neutral-aware model, the encoder's neutral channels), and with it plus analysis-by-synthesis.
+NEUTRAL_MODES = {"none": "no neutral", "neutral": "neutral", "refine": "neutral + refine"}
 
 
 # ------------------------------------------------------------------------------------- config
@@ -382,30 +386,34 @@ class EvalData:
 
 # ------------------------------------------------------------------------------------- methods
 class NetworkMethod:
-    """A checkpoint, through the public API (``retarget.api.Retargeter``)."""
+    """A checkpoint, through the public API (``retarget.api.Retargeter``), in one of the
+    ``NEUTRAL_MODES``. ``targets``: a prepared-target cache to share between the modes of one
+    checkpoint (default: its own)."""
 
-    def __init__(self, name: str, retargeter):
+    def __init__(self, name: str, retargeter, mode: str = "neutral", targets: dict | None = None):
+        if mode not in NEUTRAL_MODES:
+            raise RetargetError(f"unknown neutral mode {mode!r}; choose from {', '.join(NEUTRAL_MODES)}")
         self.name = name
         self.r = retargeter
-        self._targets: dict = {}
+        self.mode = mode
+        self._targets: dict = {} if targets is None else targets
 
     def _target(self, rig):
         if id(rig) not in self._targets:
             self._targets[id(rig)] = (rig, self.r.prepare(Mesh(rig.neutral, rig.faces)))
         return self._targets[id(rig)][1]
 
-    @staticmethod
-    def _source(case: Case) -> tuple[list[Mesh], Mesh]:
+    def _source(self, case: Case) -> tuple[list[Mesh], Mesh | None]:
         """(source frames, source neutral) as meshes; frames are encoded in the neutral's frame
-        and with its operators (``Retargeter.encode``)."""
+        and with its operators (``Retargeter.encode``); no neutral in mode "none"."""
         return ([Mesh(f, case.source.faces) for f in case.source_frames],
-                Mesh(case.source.neutral, case.source.faces))
+                None if self.mode == "none" else Mesh(case.source.neutral, case.source.faces))
 
     def transfer(self, case: Case, filters=(None,), fps: float = 30.0) -> dict:
         """{filter: (T,Vt,3) cm prediction} for each temporal filter (None = raw codes); the
         frames are encoded once and decoded once per filter (= ``Retargeter.transfer(smooth=f)``)."""
         frames, neutral = self._source(case)
-        z = self.r.encode(frames, source_neutral=neutral)
+        z = self.r.expression_codes(frames, source_neutral=neutral, refine=self.mode == "refine")
         target = self._target(case.target)
         return {f: self.r.decode(target, z if f is None else smooth_codes(z, f, fps)) for f in filters}
 
@@ -418,7 +426,7 @@ class NetworkMethod:
     def invert(self, case: Case) -> np.ndarray:
         """(T,53) ICT weights in [0,1] predicted from the source frames."""
         frames, neutral = self._source(case)
-        return self.r.invert(frames, source_neutral=neutral)
+        return self.r.invert(frames, source_neutral=neutral, refine=self.mode == "refine")
 
 
 class DoNothingMethod:
@@ -898,6 +906,22 @@ def write_heatmaps(samples, out_dir, vmax_mm: float, size: int = 256) -> list[Pa
 
 
 # ------------------------------------------------------------------------------------- CLI helpers
+def network_methods(checkpoints, modes, device=None, refine_steps: int = 0) -> list[NetworkMethod]:
+    """One method per (checkpoint, neutral mode): checkpoints [(name, path)], modes a list of
+    ``NEUTRAL_MODES`` keys. Rows are named NAME, or "NAME (MODE)" unless the only mode is the
+    default "neutral"; the modes of a checkpoint share one model and its prepared targets.
+    ``refine_steps``: ``Retargeter.refine_steps`` of the "refine" mode."""
+    from .api import Retargeter
+
+    out = []
+    for name, path in checkpoints:
+        r, targets = Retargeter.load(path, device=device, refine_steps=refine_steps), {}
+        for mode in modes:
+            label = name if list(modes) == ["neutral"] else f"{name} ({NEUTRAL_MODES[mode]})"
+            out.append(NetworkMethod(label, r, mode, targets))
+    return out
+
+
 def parse_checkpoints(specs) -> list[tuple[str, Path]]:
     """``--checkpoint`` values ``NAME=PATH`` or ``PATH`` (named by the file stem) -> [(name, path)].
     None or empty: the bundled default checkpoint. RetargetError for a missing file or a repeated

@@ -65,6 +65,18 @@ def vertex_features(canonical_vertices: np.ndarray, faces: np.ndarray) -> np.nda
     return np.concatenate([canonical_vertices, normals], axis=1).astype(np.float32)
 
 
+def neutral_channels(frame: np.ndarray, neutral: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The neutral-aware expression encoder's extra inputs (nets.model.NEUTRAL_CHANNEL_DIM = 7):
+    frame (V,3) and its source's neutral (V,3), both in the neutral's canonical frame, faces (F,3)
+    -> (V,7) float32 [frame − neutral, normal(frame) − normal(neutral), 0]; the last channel is the
+    "no neutral" flag, 0 here (the model fills 0,..,0,1 itself when no neutral is given)."""
+    frame, neutral = np.asarray(frame, np.float64), np.asarray(neutral, np.float64)
+    if frame.shape != neutral.shape:
+        raise ValueError(f"neutral_channels: frame {frame.shape} and neutral {neutral.shape} differ")
+    d_normal = vertex_normals(frame, faces) - vertex_normals(neutral, faces)
+    return np.concatenate([frame - neutral, d_normal, np.zeros((len(frame), 1))], 1).astype(np.float32)
+
+
 def prepare_mesh(vertices: np.ndarray, faces: np.ndarray, k_eig: int, image_size: int,
                  image_channels: tuple[str, ...], canon: Canonicaliser | None = None,
                  ops: Operators | None = None, cache_dir=None,

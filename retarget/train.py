@@ -45,6 +45,7 @@ DEFAULTS = {
         "augment": {"rotate_deg": 3.0, "scale": 0.05, "translate": 0.5},
         "val_identities": 4, "val_expressions": 4,
         "rig": None, "keep_vertices": None, "rig_mix": 0.5, "rig_strict": False,
+        "source_neutral_share": 0.5,  # sources given their neutral (neutral-aware models only)
         # shares of the two rig sources among the pool's identities (training_data.TargetPool)
         "sources": {"procedural": 1.0, "makehuman": 0.0},
         "makehuman": {
@@ -228,7 +229,8 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
     codes = model.encode_target(t_feat, c_t, t_ops)
     z_ge = torch.stack([
         model.encode_expression(torch.from_numpy(s.feat).to(device), codes_img[i + 1],
-                                s.entry.mesh.torch_ops(device))
+                                s.entry.mesh.torch_ops(device),
+                                None if s.neutral is None else torch.from_numpy(s.neutral).to(device))
         for i, s in enumerate(group.sources)])
     weights = torch.from_numpy(np.stack([s.weights for s in group.sources])).to(device)
     z_exp, w_exp, z_br = z_ge, weights, z_ge

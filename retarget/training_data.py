@@ -31,7 +31,8 @@ from data_synth.sampling import sample_weights
 from data_synth.tessellate import tessellate
 
 from .errors import RetargetError
-from .prepare import IMAGE_CHANNELS, PreparedMesh, prepare_mesh
+from .canonical import Canonicaliser
+from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh
 
 PAIR_KINDS = ("self", "cross_topology", "cross_identity")
 RIG_SOURCES = ("procedural", "makehuman")
@@ -55,13 +56,16 @@ class Entry:
 @dataclass
 class Source:
     """A source expression mesh: feat (V_s,6) and image (C,H,W) of the (augmented) frame in its own
-    canonical frame, the operators of its neutral, weights (53,) and its basis (53,V_s,3)."""
+    canonical frame (its neutral's when the neutral is given), the operators of its neutral,
+    weights (53,) and its basis (53,V_s,3). neutral: (V_s,7) float32 channels relative to the
+    neutral (``prepare.neutral_channels``), or None when the encoder is not given the neutral."""
 
     entry: Entry
     feat: np.ndarray
     image: np.ndarray
     weights: np.ndarray
     kind: str
+    neutral: np.ndarray | None = None
 
 
 @dataclass
@@ -226,7 +230,7 @@ class TargetPool:
                 if present is not None:
                     w *= present
             sources.append(make_source(entry, w, kind, rng, self.cfg.get("augment", {}),
-                                       self.model_cfg))
+                                       self.model_cfg, self.cfg.get("source_neutral_share", 0.0)))
         return Group(target, sources, ground_truth(weights, target))
 
 
@@ -236,20 +240,31 @@ def ground_truth(weights: np.ndarray, target: Entry) -> np.ndarray:
 
 
 def make_source(entry: Entry, weights: np.ndarray, kind: str, rng: np.random.Generator,
-                augment: dict, model_cfg) -> Source:
+                augment: dict, model_cfg, neutral_share: float = 0.0) -> Source:
     """The rig of ``entry`` driven by ``weights`` (53,), augmented by a small rotation
     (``augment["rotate_deg"]``), scale (log-uniform ±``scale``) and translation (normal,
     ``translate`` in the rig's units), then canonicalised on its own (as at inference, where no
-    neutral is given)."""
+    neutral is given).
+
+    With ``model_cfg.neutral_channels``, a share ``neutral_share`` of sources also gets its neutral
+    (the rig's neutral under the same augmentation): the frame is then canonicalised in the
+    neutral's frame (as ``Retargeter.encode`` does with ``source_neutral``) and carries the neutral
+    channels. Without the switch no random number is drawn for it (the samples stay as before)."""
     frame = entry.rig.evaluate(weights).astype(np.float64)
     rot = random_rotation(rng, augment.get("rotate_deg", 0.0))
     scale = np.exp(rng.uniform(-1, 1) * augment.get("scale", 0.0))
     shift = rng.normal(size=3) * augment.get("translate", 0.0)
     frame = (frame @ rot.T) * scale + shift
+    canon, channels = None, None
+    if model_cfg.neutral_channels and rng.random() < neutral_share:
+        neutral = (entry.rig.neutral.astype(np.float64) @ rot.T) * scale + shift
+        canon = Canonicaliser.fit(neutral, kind=model_cfg.canonical, faces=entry.rig.faces)
+        channels = neutral_channels(canon.to_canonical(frame), canon.to_canonical(neutral),
+                                    entry.rig.faces)
     prepared = prepare_mesh(frame, entry.rig.faces, model_cfg.k_eig, model_cfg.image_size,
-                            IMAGE_CHANNELS[model_cfg.image_channels], ops=entry.mesh.ops,
-                            canonical=model_cfg.canonical)
-    return Source(entry, prepared.feat, prepared.image, weights, kind)
+                            IMAGE_CHANNELS[model_cfg.image_channels], canon=canon,
+                            ops=entry.mesh.ops, canonical=model_cfg.canonical)
+    return Source(entry, prepared.feat, prepared.image, weights, kind, channels)
 
 
 class RigPool:
@@ -288,7 +303,8 @@ class RigPool:
         weights = sample_weights(rng, self.cfg["sources_per_target"], mode=self.cfg["weights"])
         weights = (weights * self.entry.present).astype(np.float32)
         sources = [make_source(self.entry, w, "self", rng, self.cfg.get("augment", {}),
-                               self.model_cfg) for w in weights]
+                               self.model_cfg, self.cfg.get("source_neutral_share", 0.0))
+                   for w in weights]
         return Group(self.entry, sources, ground_truth(weights, self.entry))
 
 

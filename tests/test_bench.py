@@ -29,14 +29,17 @@ def test_target_checks():
     frames = {"n_vertices": 11_200, "model": {"transfer": {"throughput_fps": 6.0, "latency_ms": 250.0},
                                               "animate": {"throughput_fps": 4.0},
                                               "baked": {"throughput_fps": 900.0},
-                                              "invert": {"throughput_fps": 12.0, "latency_ms": 80.0}}}
+                                              "invert": {"throughput_fps": 12.0, "latency_ms": 80.0},
+                                              "invert_no_neutral": {"latency_ms": 80.0},
+                                              "invert_refine": {"added_ms": 25.0}}}
     results = {"prepare": {"cpu": [{"n_vertices": 1_001_000, "seconds": 100.0, "peak_rss_mb": 9000.0},
                                    {"n_vertices": 98_000, "seconds": 16.0, "peak_rss_mb": 900.0}]},
                "frames": {"cpu": frames, "cuda": {**frames, "n_vertices": 2000}}}
     met = {t["target"]: t["met"] for t in check_targets(results)}
     assert met == {"prepare_100k_s": False, "prepare_1M_s": True, "prepare_1M_peak_gb": False,
                    "transfer_fps": True, "animate_fps": False, "baked_fps": True, "invert_fps": True,
-                   "transfer_call_fps": False, "invert_call_fps": True}   # 4 and 12.5 per call
+                   "transfer_call_fps": False, "invert_call_fps": True,   # 4 and 12.5 per call
+                   "refine_added_ms": False}
     assert all(t["device"] == "cpu" for t in check_targets(results))   # 2k frames: no target
 
 
@@ -74,6 +77,10 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
     assert fr["other_decoder"]["baked"]["vs_full_decoder_mse_mm2"] <= 1e-6
     # measured, not raced: which is faster is the bench's finding, not a test (it flaked under load)
     assert fr["floor_linear_blendshapes"]["throughput_fps"] > 0
+    for op in ("invert_no_neutral", "invert_refine"):
+        assert fr["model"][op]["latency_ms"] > 0 and fr["model"][op]["throughput_fps"] > 0
+    assert fr["model"]["invert_refine"]["source_bake_s"] > 0
+    assert fr["model"]["invert_refine"]["added_ms_10_steps"] > 0 and fr["model"]["invert_refine"]["added_ms"] > 0
     assert res["train"]["samples_per_s"] > 0 and res["train"]["steps_timed"] == 2
     without = {w["trick"]: w["samples_per_s"] for w in res["train"]["without"]}
     assert len(without) == 3 and all(v > 0 for v in without.values())
@@ -81,6 +88,7 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
     assert "Target preparation" in md and "linear blendshapes (floor)" in md and "samples/s" in md
     assert "| per call frames/s | batched frames/s |" in md
     assert "| basis |" in md and "baked vs decoder (mm²)" in md
+    assert "| invert_refine |" in md and "refine adds" in md
     assert "measured by undoing it" in md and "| target encoded once for S sources |" in md
     assert to_markdown(res) in md
 

@@ -1,7 +1,7 @@
 """Every documented Python example runs as written: the README's ```python blocks (in order, in one
 namespace, as a reader pastes them into one session), the indented examples of the package
 docstrings and the import blocks of docs/ARCHITECTURE.md, each in a temporary folder holding small versions of the files they name (target.obj,
-src_frame.obj, frame.obj, cap/0000.obj ...: procedural heads of a few hundred vertices)."""
+src_frame.obj, frame.obj, actor_neutral.obj, cap/0000.obj ...: procedural heads of a few hundred vertices)."""
 import re
 import textwrap
 from pathlib import Path
@@ -52,6 +52,7 @@ def files(tmp_path_factory) -> Path:
     take = source.evaluate(smooth_sequence(np.random.default_rng(0), N_CAPTURE))
     save_mesh(folder / "src_frame.obj", take[10], source.faces)
     save_mesh(folder / "frame.obj", take[20], source.faces)
+    save_mesh(folder / "actor_neutral.obj", source.neutral, source.faces)
     for i, frame in enumerate(take):
         save_mesh(folder / "cap" / f"{i:04d}.obj", frame, source.faces)
     return folder

@@ -26,6 +26,40 @@ def add_model_args(p) -> None:
     p.add_argument("--force", action="store_true", help="try meshes above the size limit anyway")
 
 
+def add_neutral_args(p) -> None:
+    p.add_argument("--source-neutral", metavar="FILE",
+                   help="the performer's neutral mesh (same topology as the frames): the canonical "
+                        "frame and operators, and for a neutral-aware model the encoder's input")
+    p.add_argument("--refine", action="store_true",
+                   help="analysis-by-synthesis: fit the weights to each frame on the decoder's rig "
+                        "baked on the source neutral (bounded least squares; needs --source-neutral)")
+    p.add_argument("--refine-steps", type=int, default=0, metavar="N",
+                   help="with --refine, then N gradient steps on the free dims of z_GE (default 0)")
+
+
+def check_neutral_args(args) -> None:
+    """RetargetError for --refine without --source-neutral or a negative --refine-steps."""
+    if args.refine and not args.source_neutral:
+        raise RetargetError("--refine needs --source-neutral (the source's neutral mesh)")
+    if args.refine_steps < 0:
+        raise RetargetError(f"--refine-steps must be >= 0, got {args.refine_steps}")
+
+
+def load_source_neutral(args, frames):
+    """The ``--source-neutral`` mesh (None without it); RetargetError naming it when its vertex
+    count is not the frames' (checked before the model is loaded)."""
+    from ..io import load_mesh
+
+    if not args.source_neutral:
+        return None
+    neutral = load_mesh(args.source_neutral, up=args.up, forward=args.forward, force=args.force)
+    if frames and neutral.n_vertices != frames[0].n_vertices:
+        raise RetargetError(f"{args.source_neutral}: the source neutral has {neutral.n_vertices} "
+                            f"vertices, but the frames have {frames[0].n_vertices}; it must share "
+                            f"their topology")
+    return neutral
+
+
 def add_smooth_arg(p) -> None:
     p.add_argument("--smooth", choices=FILTERS,
                    help="temporal filter of the codes of a sequence (streaming / offline)")
@@ -35,7 +69,8 @@ def add_smooth_arg(p) -> None:
 def retargeter(args):
     """The Retargeter of ``--checkpoint`` / ``--device``."""
     from ..api import Retargeter
-    return Retargeter.load(args.checkpoint, device=args.device)
+    return Retargeter.load(args.checkpoint, device=args.device,
+                           refine_steps=getattr(args, "refine_steps", 0))
 
 
 def rotation(args) -> np.ndarray:

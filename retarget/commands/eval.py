@@ -7,17 +7,24 @@ EXAMPLE = """retarget eval --out results/eval
 retarget eval --checkpoint full=runs/full/model.pt no_skinning=runs/noskin/model.pt \\
     --suite cross_identity cross_topology --heatmaps results/heatmaps --out results/eval
 retarget eval --config configs/eval/tiny.yaml --checkpoint runs/tiny/model.pt
-retarget eval --merge results/a/eval.json results/b/eval.json --out results/all   # one table"""
+retarget eval --merge results/a/eval.json results/b/eval.json --out results/all   # one table
+retarget eval --checkpoint runs/neutral/model.pt --neutral-modes none neutral refine --out results/n"""
 
 
 def add_arguments(p):
-    from ..evaluate import SUITES
+    from ..evaluate import NEUTRAL_MODES, SUITES
 
     p.add_argument("--checkpoint", action="extend", nargs="+", metavar="[NAME=]PATH",
                    help="checkpoint(s) to evaluate, a table row each (e.g. the model and its "
                         "ablations); default: the bundled retarget/checkpoints/default.pt")
     p.add_argument("--suite", action="extend", nargs="+", choices=SUITES, metavar="NAME",
                    help=f"run only these suites ({', '.join(SUITES)}); default: all")
+    p.add_argument("--neutral-modes", nargs="+", choices=tuple(NEUTRAL_MODES), default=["neutral"],
+                   metavar="MODE", help="a row per checkpoint and mode: none (the source's neutral "
+                   "not given), neutral (given: the default), refine (given, plus "
+                   "analysis-by-synthesis on the source's baked rig)")
+    p.add_argument("--refine-steps", type=int, default=0, metavar="N",
+                   help="mode refine: then N gradient steps on the free dims of z_GE (default 0)")
     p.add_argument("--config", help="eval config overriding configs/eval/default.yaml "
                                     "(fixed seeds and sizes)")
     p.add_argument("--out", help="folder for eval.json and eval.md")
@@ -35,9 +42,8 @@ def add_arguments(p):
 def run(args) -> int:
     from pathlib import Path
 
-    from ..api import Retargeter
-    from ..evaluate import (SUITES, ClosestPointMethod, DoNothingMethod, Evaluation, NetworkMethod,
-                            OracleMethod, load_eval_config, parse_checkpoints, real_rig_path,
+    from ..evaluate import (SUITES, ClosestPointMethod, DoNothingMethod, Evaluation, OracleMethod,
+                            load_eval_config, network_methods, parse_checkpoints, real_rig_path,
                             to_markdown, write_heatmaps, write_results)
 
     if args.merge:
@@ -49,6 +55,8 @@ def run(args) -> int:
         for path in write_results(args.out, "eval", results, markdown) if args.out else ():
             print(f"wrote {path}")
         return 0
+    from ..errors import RetargetError
+
     cfg = load_eval_config(args.config)
     suites = list(args.suite or SUITES)
     if args.real_rig:
@@ -59,8 +67,12 @@ def run(args) -> int:
               f"(pass --real-rig RIG.npz to run it)")
         suites.remove("real_rig")
     checkpoints = parse_checkpoints(args.checkpoint)
-    methods = [DoNothingMethod()] + [NetworkMethod(name, Retargeter.load(path, device=args.device))
-                                     for name, path in checkpoints] + [ClosestPointMethod()]
+    if args.refine_steps < 0:
+        raise RetargetError(f"--refine-steps must be >= 0, got {args.refine_steps}")
+    methods = ([DoNothingMethod()]
+               + network_methods(checkpoints, list(dict.fromkeys(args.neutral_modes)), args.device,
+                                 args.refine_steps)
+               + [ClosestPointMethod()])
     if not args.no_oracle:
         methods.append(OracleMethod())
     evaluation = Evaluation(cfg, methods, progress=not args.no_progress)

@@ -1,34 +1,37 @@
 """``retarget invert``: inverse rigging, mesh frame(s) -> 53 named FACS weights per frame."""
 from __future__ import annotations
 
-from ._common import add_model_args, add_smooth_arg, retargeter
+from ._common import (add_model_args, add_neutral_args, add_smooth_arg, check_neutral_args,
+                      load_source_neutral, retargeter)
 
 HELP = "inverse rigging: FRAMES (a mesh, folder or glob) -> a CSV of 53 named weights per frame"
 EXAMPLE = """retarget invert "capture/*.obj" -o weights.csv
-retarget invert capture/ -o weights_arkit.csv --names arkit --smooth one_euro"""
+retarget invert capture/ -o weights_arkit.csv --names arkit --smooth one_euro
+retarget invert capture/ -o weights.csv --source-neutral actor_neutral.obj --refine"""
 
 
 def add_arguments(p):
     p.add_argument("frames", help="a mesh, a folder of frames, or a glob (quote it)")
     p.add_argument("-o", "--out", required=True, help="output CSV (one row per frame)")
     p.add_argument("--names", choices=("ict", "arkit"), default="ict", help="column names")
-    p.add_argument("--source-neutral", help="the performer's neutral mesh (better canonical frame)")
+    add_neutral_args(p)
     add_smooth_arg(p)
     add_model_args(p)
 
 
 def run(args) -> int:
-    from ..io import check_output, load_mesh, load_sequence, sequence_files
+    from ..io import check_output, load_sequence, sequence_files
     from ..weights_io import write_weights_csv
 
+    check_neutral_args(args)
     inputs = sequence_files(args.frames)
     if args.source_neutral:
         inputs.append(args.source_neutral)
     check_output(args.out, inputs, formats=(".csv",))
     frames = load_sequence(args.frames, up=args.up, forward=args.forward, force=args.force)
-    neutral = (load_mesh(args.source_neutral, up=args.up, forward=args.forward, force=args.force)
-               if args.source_neutral else None)
-    w = retargeter(args).invert(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True)
+    neutral = load_source_neutral(args, frames)
+    w = retargeter(args).invert(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
+                                refine=args.refine)
     write_weights_csv(args.out, w.reshape(len(frames), -1), names=args.names, fps=args.fps)
     print(f"wrote {len(frames)} frame(s) of 53 weights to {args.out}")
     return 0

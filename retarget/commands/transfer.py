@@ -1,19 +1,21 @@
 """``retarget transfer``: clone the expression(s) of a source mesh or sequence onto a target."""
 from __future__ import annotations
 
-from ._common import add_model_args, add_smooth_arg, output_paths, retargeter, write_frames
+from ._common import (add_model_args, add_neutral_args, add_smooth_arg, check_neutral_args,
+                      load_source_neutral, output_paths, retargeter, write_frames)
 
 HELP = "clone expression(s) of SRC (a mesh, a folder or a glob of frames) onto the neutral TGT"
 EXAMPLE = """retarget transfer actor/frame_0001.obj character_neutral.obj -o smile.obj
 retarget transfer "capture/*.obj" character_neutral.obj -o out_frames/ --smooth savgol
-retarget transfer capture/ character_neutral.obj -o performance.glb --source-neutral actor_neutral.obj"""
+retarget transfer capture/ character_neutral.obj -o performance.glb --source-neutral actor_neutral.obj
+retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine"""
 
 
 def add_arguments(p):
     p.add_argument("source", help="source expression mesh, folder of frames, or glob (quote it)")
     p.add_argument("target", help="target neutral mesh (any topology)")
     p.add_argument("-o", "--out", required=True, help="output .obj/.ply (one frame), .glb, or a folder")
-    p.add_argument("--source-neutral", help="the source's neutral mesh (better canonical frame)")
+    add_neutral_args(p)
     p.add_argument("--format", choices=("obj", "ply"), default="obj", help="frame files in a folder")
     add_smooth_arg(p)
     add_model_args(p)
@@ -22,18 +24,18 @@ def add_arguments(p):
 def run(args) -> int:
     from ..io import load_mesh, load_sequence, sequence_files
 
+    check_neutral_args(args)
     inputs = sequence_files(args.source) + [args.target]
     if args.source_neutral:
         inputs.append(args.source_neutral)
     frames = load_sequence(args.source, up=args.up, forward=args.forward, force=args.force)
     output_paths(args.out, len(frames), inputs, args.format)
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
-    neutral = None
-    if args.source_neutral:
-        neutral = load_mesh(args.source_neutral, up=args.up, forward=args.forward, force=args.force)
+    neutral = load_source_neutral(args, frames)
     r = retargeter(args)
     tgt = r.prepare(target)
-    z = r.expression_codes(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True)
+    z = r.expression_codes(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
+                           refine=args.refine)
     z = z.reshape(-1, z.shape[-1])
     written = write_frames(args.out, r.iter_decode(tgt, z, progress=True), target.faces, inputs,
                            args, fps=args.fps, n_frames=len(z))

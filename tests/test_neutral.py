@@ -1,0 +1,243 @@
+"""The neutral-aware expression encoder (NFSConfig.neutral_channels) and analysis-by-synthesis
+(Retargeter.refine, SourceRig): channels, training sources, codes, bounded least squares on a
+baked rig, the CLI flags and the eval modes; tiny untrained models throughout."""
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from data_synth.identity import sample_identity
+from data_synth.rig import build_rig
+from data_synth.tessellate import tessellate
+from nets.model import NEUTRAL_CHANNEL_DIM, NFSConfig, NFSModel
+from retarget.api import BakedRig, Retargeter, SourceRig
+from retarget.cli import main
+from retarget.io import save_mesh
+from retarget.mesh import Mesh
+from retarget.prepare import neutral_channels, vertex_features
+from retarget.train import Trainer, group_losses, load_config, model_cfg
+
+from .test_api import tiny_checkpoint
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY_TRAIN = ROOT / "configs" / "train" / "tiny.yaml"
+TINY_EVAL = ROOT / "configs" / "eval" / "tiny.yaml"
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return build_rig(sample_identity(0, split="test"), tessellate(n_vertices=400, kind="regular"))
+
+
+@pytest.fixture(scope="module")
+def weights():
+    return (np.random.default_rng(0).random((3, 53)) * 0.6).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def r():
+    torch.manual_seed(0)
+    return Retargeter(NFSModel(NFSConfig.preset("tiny", neutral_channels=True)), device="cpu")
+
+
+# ------------------------------------------------------------------------------- channels
+def test_channels_are_zero_and_flag_without_a_neutral_and_the_displacement_with_one(rig, weights):
+    torch.manual_seed(0)
+    model = NFSModel(NFSConfig.preset("tiny", neutral_channels=True))
+    frame = rig.evaluate(weights[0]).astype(np.float64)
+    feat = torch.from_numpy(vertex_features(frame.astype(np.float32), rig.faces))
+    c = torch.zeros(model.cfg.image_code_dim)
+    x = model.expression_input(feat, c, None)
+    assert x.shape == (len(frame), 6 + model.cfg.image_code_dim + NEUTRAL_CHANNEL_DIM)
+    assert torch.all(x[:, -NEUTRAL_CHANNEL_DIM:-1] == 0) and torch.all(x[:, -1] == 1)
+    ch = neutral_channels(frame, rig.neutral, rig.faces)
+    assert ch.shape == (len(frame), NEUTRAL_CHANNEL_DIM) and np.all(ch[:, -1] == 0)
+    np.testing.assert_allclose(ch[:, :3], frame - rig.neutral, atol=1e-5)
+    assert np.abs(ch[:, 3:6]).max() > 1e-3                       # the expression turns normals
+    assert np.abs(neutral_channels(rig.neutral, rig.neutral, rig.faces)).max() == 0
+    x = model.expression_input(feat, c, torch.from_numpy(ch))
+    assert torch.equal(x[:, -NEUTRAL_CHANNEL_DIM:], torch.from_numpy(ch))
+    with pytest.raises(ValueError, match="neutral channels must be"):
+        model.expression_input(feat, c, torch.from_numpy(ch[:-1]))
+
+
+def test_old_configs_load_with_the_switch_off_and_ignore_the_neutral():
+    d = NFSConfig.preset("tiny").to_dict()
+    del d["neutral_channels"]
+    cfg = NFSConfig.from_dict(d)
+    assert cfg.neutral_channels is False
+    torch.manual_seed(0)
+    model = NFSModel(cfg)
+    assert model.expression_encoder.first.in_features == 6 + cfg.image_code_dim
+    on = NFSModel(NFSConfig.preset("tiny", neutral_channels=True))
+    assert on.expression_encoder.first.in_features == 6 + cfg.image_code_dim + NEUTRAL_CHANNEL_DIM
+
+
+def test_codes_change_with_the_neutral(r, rig, weights):
+    frames = [Mesh(f, rig.faces) for f in rig.evaluate(weights)]
+    neutral = Mesh(rig.neutral, rig.faces)
+    z_none, z_neutral = r.encode(frames), r.encode(frames, source_neutral=neutral)
+    assert z_none.shape == z_neutral.shape == (3, 128)
+    assert np.abs(z_none - z_neutral).max() > 1e-4
+
+
+# ------------------------------------------------------------------------------- training
+def _cfg(neutral: bool, share: float) -> dict:
+    cfg = load_config(TINY_TRAIN)
+    cfg["model"]["neutral_channels"] = neutral
+    cfg["data"]["source_neutral_share"] = share
+    return cfg
+
+
+def test_training_gives_a_share_of_sources_their_neutral(tmp_path):
+    trainer = Trainer(_cfg(True, 1.0), tmp_path, progress=False)
+    group = trainer.pool.sample(0)
+    for s in group.sources:
+        assert s.neutral is not None and s.neutral.shape == (len(s.feat), NEUTRAL_CHANNEL_DIM)
+        assert np.all(s.neutral[:, -1] == 0) and np.abs(s.neutral[:, :3]).max() > 0
+    losses = group_losses(trainer.model, group, trainer.cfg["loss"], 200,
+                          np.random.default_rng(0), "cpu")
+    assert torch.isfinite(losses["total"])
+    assert all(s.neutral is None for s in Trainer(_cfg(True, 0.0), tmp_path / "b",
+                                                  progress=False).pool.sample(0).sources)
+
+
+def test_without_the_switch_the_training_samples_are_unchanged(tmp_path):
+    a = Trainer(_cfg(False, 0.0), tmp_path / "a", progress=False).pool.sample(3)
+    b = Trainer(_cfg(False, 1.0), tmp_path / "b", progress=False).pool.sample(3)
+    for sa, sb in zip(a.sources, b.sources):
+        assert sb.neutral is None
+        assert np.array_equal(sa.feat, sb.feat) and np.array_equal(sa.weights, sb.weights)
+
+
+def test_neutral_and_no_neutral_configs_differ_from_default_only_in_the_switch():
+    configs = {n: load_config(ROOT / "configs" / "train" / f"{n}.yaml")
+               for n in ("default", "neutral", "no_neutral")}
+    assert model_cfg(configs["neutral"]).neutral_channels is True
+    assert model_cfg(configs["no_neutral"]) == model_cfg(configs["default"])
+    assert model_cfg(configs["default"]).neutral_channels is False
+    for name in ("neutral", "no_neutral"):
+        assert configs[name]["train"] == configs["default"]["train"]
+        assert configs[name]["loss"] == configs["default"]["loss"]
+
+
+# ------------------------------------------------------------------------------- analysis by synthesis
+def test_bounded_least_squares_recovers_the_weights_of_an_exactly_linear_rig(rig):
+    w = np.random.default_rng(1).random(53).astype(np.float32)
+    w[:5] = 0.0
+    w[5:10] = 1.0                                                  # on the bounds
+    # (a tiny prior: on this coarse rig eyeLookIn_L and eyeLookOut_L are nearly opposite, their
+    # sum is almost invisible, and a prior of 1e-6 already decides it)
+    src = SourceRig.make(None, BakedRig(rig.neutral, rig.deltas), prior=1e-10)
+    start = np.full(53, 0.5, np.float32)
+    fit = src.fit(rig.evaluate(w), start)
+    assert fit.min() >= 0 and fit.max() <= 1
+    assert np.abs(fit - w).max() < 1e-3
+    # an expression beyond the box is projected into it: the weights stay in [0, 1]
+    far = src.fit(rig.neutral + 3.0 * (rig.evaluate(w) - rig.neutral), start)
+    assert far.min() >= 0 and far.max() <= 1 and far[5:10].min() == pytest.approx(1.0)
+
+
+def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
+    neutral = Mesh(rig.neutral, rig.faces)
+    baked = r.source_rig(neutral).baked
+    assert r.source_rig(neutral).baked is baked                    # baked once per neutral
+    frames = [Mesh(f, rig.faces) for f in baked.evaluate(weights)]
+    w = r.invert(frames, source_neutral=neutral, refine=True)
+    assert w.shape == (3, 53) and w.min() >= 0 and w.max() <= 1
+    # the fit explains the frames at least as well as the weights that made them (up to the prior)
+    for f, wi, true in zip(frames, w, weights):
+        fitted = np.square(baked.evaluate(wi) - f.vertices).sum()
+        scale = np.square(f.vertices - baked.neutral).sum()
+        assert fitted <= np.square(baked.evaluate(true) - f.vertices).sum() + 1e-2 * scale
+    z = r.expression_codes(frames, source_neutral=neutral, refine=True)
+    assert np.array_equal(z[:, :53], w) and np.all(z[:, 53:] == 0)
+    with pytest.raises(Exception, match="refine needs the source's neutral"):
+        r.invert(frames, refine=True)
+
+
+def test_refine_steps_fit_the_free_dims(rig, weights):
+    torch.manual_seed(0)
+    model = NFSModel(NFSConfig.preset("tiny", neutral_channels=True))
+    stepped = Retargeter(model, device="cpu", refine_steps=3)
+    neutral = Mesh(rig.neutral, rig.faces)
+    frames = [Mesh(f, rig.faces) for f in rig.evaluate(weights[:1])]
+    z = stepped.expression_codes(frames, source_neutral=neutral, refine=True)
+    assert np.abs(z[:, 53:]).max() > 0 and np.all(np.isfinite(z))
+    again = stepped.expression_codes(frames, source_neutral=neutral, refine=True)
+    np.testing.assert_array_equal(z, again)
+
+
+# ------------------------------------------------------------------------------- CLI and eval
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, rig, weights):
+    d = tmp_path_factory.mktemp("neutral_cli")
+    tiny_checkpoint(d / "tiny.pt", neutral_channels=True)
+    save_mesh(d / "neutral.obj", Mesh(rig.neutral, rig.faces))
+    for t, f in enumerate(rig.evaluate(weights)):
+        save_mesh(d / "seq" / f"frame_{t}.obj", Mesh(f, rig.faces))
+    other = build_rig(sample_identity(1, split="test"), tessellate(n_vertices=300, kind="regular"))
+    save_mesh(d / "other_neutral.obj", Mesh(other.neutral, other.faces))
+    return d
+
+
+def _cli(files, *argv) -> int:
+    return main([str(a) for a in argv] + ["--checkpoint", str(files / "tiny.pt"), "--device", "cpu"])
+
+
+def test_invert_and_transfer_refine_on_the_command_line(files, tmp_path):
+    out = tmp_path / "w.csv"
+    assert _cli(files, "invert", files / "seq", "-o", out, "--source-neutral",
+                files / "neutral.obj", "--refine") == 0
+    with open(out) as f:
+        rows = list(csv.DictReader(f))
+    values = np.array([[float(v) for k, v in row.items() if k not in ("frame", "time")]
+                       for row in rows])
+    assert len(rows) == 3 and values.min() >= 0 and values.max() <= 1
+    assert _cli(files, "transfer", files / "seq" / "frame_0.obj", files / "neutral.obj", "-o",
+                tmp_path / "t.obj", "--source-neutral", files / "neutral.obj", "--refine",
+                "--refine-steps", "1") == 0
+    assert (tmp_path / "t.obj").stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv,fragment", [
+    (["--refine"], "--refine needs --source-neutral"),
+    (["--source-neutral", "NEUTRAL_OTHER"], "has 303 vertices, but the frames have 415"),
+    (["--source-neutral", "NEUTRAL_OTHER", "--refine"], "has 303 vertices, but the frames have 415"),
+    (["--source-neutral", "NEUTRAL", "--refine", "--refine-steps", "-1"], "--refine-steps must be"),
+])
+def test_bad_neutral_arguments_give_one_error_line(files, tmp_path, capsys, argv, fragment):
+    argv = [{"NEUTRAL": files / "neutral.obj", "NEUTRAL_OTHER": files / "other_neutral.obj"}.get(a, a)
+            for a in argv]
+    for command in (["invert", files / "seq", "-o", tmp_path / "w.csv"],
+                    ["transfer", files / "seq", files / "neutral.obj", "-o", tmp_path / "out"]):
+        capsys.readouterr()
+        assert _cli(files, *command, *argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error: ") and fragment in err[0], err
+        if "303" in fragment:
+            assert err[0].startswith(f"error: {files / 'other_neutral.obj'}: ")
+        assert not (tmp_path / "w.csv").exists() and not (tmp_path / "out").exists()
+
+
+def test_eval_neutral_modes_make_a_row_each(files, tmp_path):
+    out = tmp_path / "eval"
+    assert main(["eval", "--config", str(TINY_EVAL), "--checkpoint", f"n={files / 'tiny.pt'}",
+                 "--suite", "self", "inverse", "--neutral-modes", "none", "neutral", "refine",
+                 "--no-oracle", "--no-progress", "--out", str(out), "--device", "cpu"]) == 0
+    res = json.loads((out / "eval.json").read_text())
+    rows = {"n (no neutral)", "n (neutral)", "n (neutral + refine)"}
+    assert set(res["methods"]) == rows | {"do nothing", "closest point"}
+    inverse = {k: v for k, v in res["suites"]["inverse"]["methods"].items() if k in rows}
+    assert set(inverse) == rows and all(0 <= m["weight_mae"] <= 1 for m in inverse.values())
+    assert inverse["n (no neutral)"]["weight_mae"] != inverse["n (neutral)"]["weight_mae"]
+
+
+def test_eval_refuses_negative_refine_steps(files, tmp_path, capsys):
+    assert main(["eval", "--config", str(TINY_EVAL), "--checkpoint", str(files / "tiny.pt"),
+                 "--suite", "inverse", "--neutral-modes", "refine", "--refine-steps", "-2",
+                 "--no-oracle", "--no-progress", "--device", "cpu"]) == 2
+    assert capsys.readouterr().err.strip() == "error: --refine-steps must be >= 0, got -2"
