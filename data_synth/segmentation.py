@@ -50,11 +50,9 @@ _FINE_TO = {level: np.array([SEGMENT_NAMES[level].index(_MERGE[level].get(f, f))
             for level in SEGMENT_LEVELS}
 
 
-def _fine_labels(a, e):
-    """Finest (24-region) labels (V,) int64 from template angles (rad)."""
-    side = np.abs(a)
-    left = a >= 0
-    lab = np.full(a.shape, _FINE.index("scalp"), dtype=np.int64)
+def region_painter(lab: np.ndarray, left: np.ndarray):
+    """``put(mask, name_l, name_r=None)``: write the finest region ``name_l`` into the labels
+    ``lab`` (V,) where ``mask``, or ``name_l`` / ``name_r`` split by ``left`` (V,) bool (+x side)."""
 
     def put(mask, name_l, name_r=None):
         if name_r is None:
@@ -62,6 +60,16 @@ def _fine_labels(a, e):
         else:
             lab[mask & left] = _FINE.index(name_l)
             lab[mask & ~left] = _FINE.index(name_r)
+
+    return put
+
+
+def _fine_labels(a, e):
+    """Finest (24-region) labels (V,) int64 from template angles (rad)."""
+    side = np.abs(a)
+    left = a >= 0
+    lab = np.full(a.shape, _FINE.index("scalp"), dtype=np.int64)
+    put = region_painter(lab, left)
 
     face = (side < 1.25) & (e > -1.0) & (e < 0.95)
     put(face & (e >= 0.7), "forehead_L", "forehead_R")

@@ -54,6 +54,22 @@ class _BinaryBuilder:
         return b"".join(self.chunks)
 
 
+def rig_arrays(neutral, faces, deltas, names, what: str = "shapes"):
+    """A rig's arrays checked and typed for writing: neutral (V,3) float32, faces (F,3) int64,
+    deltas (K,V,3) float32, names [K] str. ValueError for mismatched shapes or face indices."""
+    neutral = np.asarray(neutral, dtype=np.float32).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    deltas = np.asarray(deltas, dtype=np.float32)
+    names = [str(n) for n in names]
+    if deltas.ndim != 3 or deltas.shape[1:] != neutral.shape:
+        raise ValueError(f"deltas must be (K,{len(neutral)},3), got {deltas.shape}")
+    if len(names) != len(deltas):
+        raise ValueError(f"{len(deltas)} {what} but {len(names)} names")
+    if faces.size and (faces.min() < 0 or faces.max() >= len(neutral)):
+        raise ValueError("face index out of range")
+    return neutral, faces, deltas, names
+
+
 def write_rig_glb(path, neutral, faces, deltas, names, animation=None, fps: float = 30.0,
                   normals: bool = True, interpolation: str = "LINEAR") -> None:
     """Write a morph-target rig as GLB, atomically.
@@ -65,16 +81,7 @@ def write_rig_glb(path, neutral, faces, deltas, names, animation=None, fps: floa
     """
     import pygltflib
 
-    neutral = np.asarray(neutral, dtype=np.float32).reshape(-1, 3)
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    deltas = np.asarray(deltas, dtype=np.float32)
-    names = [str(n) for n in names]
-    if deltas.ndim != 3 or deltas.shape[1:] != neutral.shape:
-        raise ValueError(f"deltas must be (K,{len(neutral)},3), got {deltas.shape}")
-    if len(names) != len(deltas):
-        raise ValueError(f"{len(deltas)} morph targets but {len(names)} names")
-    if faces.size and (faces.min() < 0 or faces.max() >= len(neutral)):
-        raise ValueError("face index out of range")
+    neutral, faces, deltas, names = rig_arrays(neutral, faces, deltas, names, "morph targets")
 
     gltf = pygltflib.GLTF2(asset=pygltflib.Asset(generator="retarget", version="2.0"))
     b = _BinaryBuilder(gltf)

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RetargetError
+from .glb import rig_arrays
 from .io import atomic_output
 from .mesh import vertex_normals
 
@@ -62,19 +63,10 @@ def write_rig_usd(path, neutral, faces, deltas, names, animation=None, fps: floa
     require_usd(path)
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 
-    neutral = np.asarray(neutral, dtype=np.float32).reshape(-1, 3)
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    deltas = np.asarray(deltas, dtype=np.float32)
-    names = [str(n) for n in names]
-    if deltas.ndim != 3 or deltas.shape[1:] != neutral.shape:
-        raise ValueError(f"deltas must be (K,{len(neutral)},3), got {deltas.shape}")
-    if len(names) != len(deltas):
-        raise ValueError(f"{len(deltas)} blend shapes but {len(names)} names")
+    neutral, faces, deltas, names = rig_arrays(neutral, faces, deltas, names, "blend shapes")
     prims = [_prim_name(n) for n in names]
     if len(set(prims)) != len(prims):
         raise ValueError("blend shape names must be distinct as USD identifiers")
-    if faces.size and (faces.min() < 0 or faces.max() >= len(neutral)):
-        raise ValueError("face index out of range")
     if up_axis not in ("Y", "Z"):
         raise ValueError(f"up_axis must be 'Y' or 'Z', got {up_axis!r}")
     if not fps > 0 or not meters_per_unit > 0:

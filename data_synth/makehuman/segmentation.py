@@ -12,7 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..segmentation import _FINE, _FINE_TO, SEGMENT_NAMES
+from ..segmentation import _FINE, _FINE_TO, SEGMENT_NAMES, region_painter
 from . import assets
 
 EYE = np.array([3.24, 72.82, 13.40])      # left (+x) eye centre; the right one mirrors it
@@ -29,13 +29,7 @@ def _fine_labels(v: np.ndarray, part: np.ndarray) -> np.ndarray:
     x, y, z = v[:, 0], v[:, 1], v[:, 2]
     side, left = np.abs(x), x >= 0
     lab = np.full(len(v), _FINE.index("scalp"), np.int64)
-
-    def put(mask, name_l, name_r=None):
-        if name_r is None:
-            lab[mask] = _FINE.index(name_l)
-        else:
-            lab[mask & left] = _FINE.index(name_l)
-            lab[mask & ~left] = _FINE.index(name_r)
+    put = region_painter(lab, left)
 
     front = z > 9.0 - 0.25 * np.maximum(0, EYE[1] + 4 - y)    # the face, not the sides of the head
     put(front & (y >= EYE[1] + 3.0) & (y < EYE[1] + 8.0), "forehead_L", "forehead_R")
