@@ -35,9 +35,9 @@ HEADS = {
                    dict(identity_seed=1, n_vertices=2000, kind="jittered", region="face", tess_seed=2)),
     "makehuman": (dict(identity_seed=0, n_vertices=3000, kind="decimated", crop="head_neck",
                        tess_seed=1),
-                  dict(identity_seed=1, n_vertices=2500, kind="jittered", crop="bust", tess_seed=2)),
+                  dict(identity_seed=1, n_vertices=2500, kind="jittered", crop="head", tess_seed=2)),
 }
-DEFAULT_HEADS = "procedural"   # the heads the bundled model was trained on
+DEFAULT_HEADS = "makehuman"    # realistic heads first: what users bring
 ERROR_SCALE_MM = 3.0  # the heatmap saturates at this error
 
 
