@@ -28,6 +28,8 @@ number below has exact ground truth unless a table says otherwise:
   remeshes; the ``heads`` section of the config), exact GT as for the procedural suites: one
   identity on one tessellation; identity i -> i+1; i -> i+1 across tessellations; and one identity
   across crops (bust -> head, face mask -> bust). Shapes an identity lacks get weight 0.
+  ``head_inverse`` and ``head_animate``: inverse rigging and driving from FACS weights on the
+  realistic heads, as ``inverse`` and ``animate`` are on the procedural ones.
 - ``frame``: no method, the canonical frames themselves (``retarget.canonical``): the MakeHuman head
   of ``data_synth/makehuman/data`` as face mask, head, head with eye sockets and mouth cavity, and
   bust (:func:`makehuman_crops`), and each test identity's procedural full head against its face
@@ -80,7 +82,8 @@ from .smoothing import FILTERS, smooth_codes
 
 #: Suite names; a suite's index seeds its weights, so new suites go at the end.
 SUITES = ("self", "cross_identity", "cross_topology", "inverse", "jitter", "real_rig", "animate",
-          "frame", "head_self", "head_cross_identity", "head_cross_topology", "head_cross_crop")
+          "frame", "head_self", "head_cross_identity", "head_cross_topology", "head_cross_crop",
+          "head_inverse", "head_animate")
 TRANSFER_SUITES = ("self", "cross_identity", "cross_topology", "head_self", "head_cross_identity",
                    "head_cross_topology", "head_cross_crop")
 #: Transfer suites whose cases come in named pairs of tessellations or crops (a column each).
@@ -336,7 +339,7 @@ class EvalData:
             w = self.weights(suite, index, h["expressions"]) * (src.present & tgt.present)
             return Case(label, src, w.astype(np.float32), tgt, w.astype(np.float32))
 
-        if suite == "head_self":
+        if suite in ("head_self", "head_inverse"):
             return [case(f"head {i}", self.head_rig(i), self.head_rig(i), i) for i in range(n)]
         if suite == "head_cross_identity":
             return [case(f"head {i} -> head {(i + 1) % n}", self.head_rig(i), self.head_rig((i + 1) % n), i)
@@ -595,13 +598,20 @@ class Evaluation:
     def suite_head_cross_crop(self) -> dict:
         return self._transfer_suite("head_cross_crop")
 
-    def suite_animate(self) -> dict:
-        """Driving from FACS weights: the ``self`` cases (same targets, same weights) decoded from
-        z_GE = [w, 0]; MSE and segment-averaged MSE in mm² against the rig."""
+    def suite_head_inverse(self) -> dict:
+        return self.suite_inverse("head_inverse")
+
+    def suite_head_animate(self) -> dict:
+        return self.suite_animate("head_self")
+
+    def suite_animate(self, cases_of: str = "self") -> dict:
+        """Driving from FACS weights: the ``cases_of`` self-retargeting cases (same targets, same
+        weights) decoded from z_GE = [w, 0]; MSE and segment-averaged MSE in mm² against the rig."""
         res = {"exact_gt": True, "methods": {}}
+        cases = self.data.cases(cases_of)
         for m in self.methods:
             errs = []
-            for case in self._bar(self.data.cases("self"), f"animate [{m.name}]"):
+            for case in self._bar(cases, f"animate {cases_of} [{m.name}]"):
                 pred = m.animate(case)
                 if pred is None:
                     break
@@ -610,12 +620,12 @@ class Evaluation:
                 res["methods"][m.name] = summarise(errs)
         return res
 
-    def suite_inverse(self) -> dict:
+    def suite_inverse(self, suite: str = "inverse") -> dict:
         """Inverse rigging: rig MSE of the re-evaluated predicted weights, and the weight MAE."""
         res = {"exact_gt": True, "methods": {}}
         for m in self.methods:
             errs, maes = [], []
-            for case in self._bar(self.data.cases("inverse"), f"inverse [{m.name}]"):
+            for case in self._bar(self.data.cases(suite), f"{suite} [{m.name}]"):
                 w = m.invert(case)
                 if w is None:
                     break
@@ -807,18 +817,23 @@ def to_markdown(results: dict) -> str:
                     for i, name in enumerate(results["segment_names"])]
         out.append(f"<details><summary>{title}: MSE per segment (mm²)</summary>\n\n"
                    + md_table(["segment"] + methods, seg_rows) + "\n\n</details>\n")
-    if "inverse" in s:
-        out.append("### Inverse rigging (exact GT: predicted weights re-applied to the identity's rig)\n")
+    for inv, heads in (("inverse", ""), ("head_inverse", "Realistic heads: ")):
+        if inv not in s:
+            continue
+        out.append(f"### {heads}Inverse rigging (exact GT: predicted weights re-applied to the "
+                   f"identity's rig)\n")
         out.append("do nothing = weights 0 applied to the rig (the neutral), and the MAE of "
                    "predicting 0.\n")
-        rows = [[m, cell("inverse", m, "mse_mm2"), cell("inverse", m, "seg_mse_mm2"),
-                 cell("inverse", m, "weight_mae")] for m in methods]
+        rows = [[m, cell(inv, m, "mse_mm2"), cell(inv, m, "seg_mse_mm2"),
+                 cell(inv, m, "weight_mae")] for m in methods]
         out.append(md_table(["method", "rig MSE", "segment-avg MSE", "weight MAE"], rows) + "\n")
-    if "animate" in s:
-        out.append("### Driving from FACS weights (animate: the self-retargeting targets and weights, "
-                   "decoded from z_GE = [w, 0]; exact GT)\n")
-        rows = [[m, cell("animate", m, "mse_mm2"), cell("animate", m, "seg_mse_mm2"),
-                 cell("self", m, "mse_mm2")] for m in methods if m in s["animate"]["methods"]]
+    for anim, own, heads in (("animate", "self", ""), ("head_animate", "head_self", "Realistic heads: ")):
+        if anim not in s:
+            continue
+        out.append(f"### {heads}Driving from FACS weights (animate: the self-retargeting targets and "
+                   f"weights, decoded from z_GE = [w, 0]; exact GT)\n")
+        rows = [[m, cell(anim, m, "mse_mm2"), cell(anim, m, "seg_mse_mm2"),
+                 cell(own, m, "mse_mm2")] for m in methods if m in s[anim]["methods"]]
         out.append(md_table(["method", "MSE", "segment-avg MSE", "self-retargeting MSE (same cases)"],
                             rows) + "\n")
     if "jitter" in s:

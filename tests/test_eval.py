@@ -225,6 +225,12 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     ratio = res["suites"]["real_rig"]["ratios"]["full"]["sampled"]["real_to_real"]["mse_mm2"]
     assert ratio == pytest.approx(real["sampled"]["real_to_real"]["mse_mm2"]
                                   / real_methods["do nothing"]["sampled"]["real_to_real"]["mse_mm2"])
+    for suite in ("head_inverse", "head_animate"):   # the realistic heads' inverse and animate
+        assert {"full", "noskin", "do nothing"} <= set(res["suites"][suite]["methods"]), suite
+        assert res["suites"][suite]["methods"]["full"]["mse_mm2"] > 0
+    assert 0 <= res["suites"]["head_inverse"]["methods"]["full"]["weight_mae"] <= 1
+    md_text = (out / "eval.md").read_text()
+    assert "Realistic heads: Inverse rigging" in md_text and "Realistic heads: Driving" in md_text
     frame = res["suites"]["frame"]["makehuman"]
     assert abs(frame["face"]["bust"]["scale_ratio"] - 1) < 0.05 and frame["bbox"]["bust"]["scale_ratio"] < 0.5
     assert real["sampled"]["animate"]["mse_mm2"] > 0
