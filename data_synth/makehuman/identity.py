@@ -147,9 +147,8 @@ def head_neutral(identity: HeadIdentity, part: str = "head") -> np.ndarray:
     """The identity's neutral: part "head" -> (4326,3) (skin, then mouth cavity and eye
     sockets), "bust" -> (5472,3); float32 cm, MakeHuman's origin (macros move the head a little)."""
     z = assets.heads()
-    if part == "head":
-        targets = z["target_deltas_q"].astype(np.float32) * np.float32(z["deltas_scale_cm"])
-        return z["full_neutral"] + np.tensordot(identity.weights, targets, axes=1)
+    if part == "head":   # the bust's first rows (its bust-only targets are 0 there)
+        return head_neutral(identity, "bust")[:assets.N_HEAD]
     if part == "bust":
         return (z["bust_neutral"] + np.tensordot(identity.weights, assets.bust_targets(), axes=1)
                 + np.tensordot(identity.extra, assets.bust_extra_targets(), axes=1))
