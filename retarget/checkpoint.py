@@ -114,3 +114,44 @@ def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:
         raise RetargetError(f"{path}: checkpoint does not match this version's model "
                             f"({str(e).splitlines()[0][:200]})") from None
     return model
+
+
+def warm_start(model: NFSModel, initial: NFSModel) -> dict[str, list[str]]:
+    """Copy into ``model`` the weights of ``initial``, a model of another config (a new design
+    started from a trained one), and return what was done: {"copied": [...], "widened": [...],
+    "fresh": [...]} parameter names.
+
+    A tensor is copied when its name and shape agree, except the decoder's when the two decoders
+    differ in kind (``mlp`` / ``basis``: the same shapes mean different things). The expression
+    encoder's first layer, widened by the neutral channels (``NFSConfig.neutral_channels``, appended
+    after [v, c]), takes the old columns and zeros for the new ones, so the warm-started encoder
+    computes what the old one did until training moves it. Everything else keeps its fresh
+    initialisation, except a fresh decoder's last layer, which starts at zero: the warm-started
+    model first predicts no displacement (doing nothing) rather than a random field whose large
+    first gradients would pull the copied encoders around."""
+    old = initial.state_dict()
+    new = model.state_dict()
+    same_decoder = model.cfg.decoder == initial.cfg.decoder
+    report: dict[str, list[str]] = {"copied": [], "widened": [], "fresh": []}
+    with torch.no_grad():
+        for name, tensor in new.items():
+            src = old.get(name)
+            if src is None or (name.startswith("decoder.") and not same_decoder):
+                report["fresh"].append(name)
+            elif src.shape == tensor.shape:
+                tensor.copy_(src)
+                report["copied"].append(name)
+            elif (name == "expression_encoder.first.weight" and src.dim() == 2
+                  and src.shape[0] == tensor.shape[0] and src.shape[1] < tensor.shape[1]):
+                tensor.zero_()
+                tensor[:, :src.shape[1]] = src
+                report["widened"].append(name)
+            else:
+                report["fresh"].append(name)
+    model.load_state_dict(new)
+    if not same_decoder:
+        with torch.no_grad():
+            last = model.decoder[-1]
+            last.weight.zero_()
+            last.bias.zero_()
+    return report

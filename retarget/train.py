@@ -28,7 +28,8 @@ from nets import losses as L
 from nets.model import NFSConfig, NFSModel
 
 from .config import merge, read_yaml
-from .checkpoint import CHECKPOINT_FORMAT, load_checkpoint, model_from_checkpoint, save_checkpoint
+from .checkpoint import (CHECKPOINT_FORMAT, load_checkpoint, model_from_checkpoint, save_checkpoint,
+                         warm_start)
 from .errors import RetargetError
 from .metrics import CM_TO_MM, segment_mse_mm2
 from .prepare import IMAGE_CHANNELS, vertex_features
@@ -318,7 +319,8 @@ LOG_COLUMNS = ("step", "elapsed_s", "lr", "samples_per_s", "total", "L_dec", "L_
 class Trainer:
     """Runs one training config into ``out_dir`` (``last.pt``, ``model.pt``, ``train_log.csv``)."""
 
-    def __init__(self, cfg: dict, out_dir, config_path: str = "", init=None, progress=True):
+    def __init__(self, cfg: dict, out_dir, config_path: str = "", init=None, progress=True,
+                 init_partial: bool = False):
         self.cfg, self.out = cfg, Path(out_dir)
         check_values(cfg, config_path or "config")
         self.device = pick_device()
@@ -327,13 +329,18 @@ class Trainer:
         seed = cfg["train"]["seed"]
         torch.manual_seed(seed)
         self.model = NFSModel(self.model_cfg).to(self.device)
+        self.init_report: dict[str, list[str]] | None = None
         if init is not None:
             initial = model_from_checkpoint(load_checkpoint(init), init)
-            if initial.cfg != self.model_cfg:
+            if init_partial:
+                self.init_report = warm_start(self.model, initial)
+            elif initial.cfg != self.model_cfg:
                 raise RetargetError(f"{init}: the checkpoint's model does not match the config's "
                                     f"(model: {cfg['model']}); leave --config out to fine-tune "
-                                    f"with the checkpoint's own model")
-            self.model.load_state_dict(initial.state_dict())
+                                    f"with the checkpoint's own model, or give --init-partial to "
+                                    f"start a new design from the weights that fit")
+            else:
+                self.model.load_state_dict(initial.state_dict())
         if self.world > 1:
             for p in self.model.parameters():
                 dist.broadcast(p.data, 0)

@@ -228,3 +228,58 @@ def test_free_dims_dropout_zeroes_the_dims_past_the_weights_of_some_sources():
     out.sum().backward()                      # the weights keep their gradient in every source
     assert (z.grad[:, :53] == 1).all() and (z.grad[dropped, 53:] == 0).all()
     assert (free_dims_dropout(z, 53, 1.0, np.random.default_rng(1))[:, 53:] == 0).all()
+
+
+def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_new_decoder(tmp_path):
+    from data_synth.identity import sample_identity
+    from data_synth.rig import build_rig
+    from data_synth.tessellate import tessellate
+    from nets.model import NFSConfig, NFSModel
+    from retarget.checkpoint import warm_start
+    from retarget.prepare import IMAGE_CHANNELS, prepare_mesh
+
+    torch.manual_seed(0)
+    old = NFSModel(NFSConfig.preset("tiny"))
+    torch.manual_seed(1)
+    new = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2,
+                                    neutral_channels=True))
+    report = warm_start(new, old)
+    assert report["widened"] == ["expression_encoder.first.weight"]
+    assert report["fresh"] and all(n.startswith("decoder.") for n in report["fresh"])
+    assert torch.equal(new.identity_encoder.last.weight, old.identity_encoder.last.weight)
+    assert torch.equal(new.cnn.state_dict()[next(iter(new.cnn.state_dict()))],
+                       old.cnn.state_dict()[next(iter(old.cnn.state_dict()))])
+    rig = build_rig(sample_identity(0, split="test"), tessellate(n_vertices=300, kind="regular"))
+    cfg = old.cfg
+    mesh = prepare_mesh(rig.neutral, rig.faces, cfg.k_eig, cfg.image_size,
+                        IMAGE_CHANNELS[cfg.image_channels])
+    feat, img, ops = mesh.torch_inputs("cpu")
+    with torch.no_grad():
+        c = old.image_code(img)[0]
+        assert torch.equal(new.image_code(img)[0], c)
+        # no neutral (channels zero, flag 1): the widened encoder computes what the old one did
+        torch.testing.assert_close(new.encode_expression(feat, c, ops),
+                                   old.encode_expression(feat, c, ops), rtol=1e-5, atol=1e-6)
+        codes = new.encode_target(feat, c, ops)
+        z = torch.rand(new.cfg.code_dim)
+        assert torch.count_nonzero(new.decode_target(feat, c, codes, z[None])) == 0
+    same = NFSModel(NFSConfig.preset("tiny", decoder_width=16))   # same decoder kind, other widths
+    report = warm_start(same, old)
+    assert "decoder.0.weight" in report["fresh"] and "decoder.0.weight" not in report["copied"]
+    assert torch.count_nonzero(same.decoder[-1].weight) > 0    # a same-kind decoder keeps its init
+
+
+def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
+    Trainer(tiny_cfg(), tmp_path / "a", progress=False).export(tmp_path / "tiny.pt")
+    cfg = tiny_cfg(steps=2)
+    cfg["model"] = {"preset": "tiny", "decoder": "basis", "neutral_channels": True}
+    with pytest.raises(RetargetError, match="--init-partial"):
+        Trainer(cfg, tmp_path / "b", init=tmp_path / "tiny.pt", progress=False)
+    t = Trainer(cfg, tmp_path / "c", init=tmp_path / "tiny.pt", progress=False, init_partial=True)
+    assert t.init_report["widened"] == ["expression_encoder.first.weight"]
+    t.run()
+    assert (tmp_path / "c" / "model.pt").is_file()
+    res = subprocess.run([sys.executable, "-m", "retarget.cli", "train", "--config", str(TINY),
+                          "--init-partial", "--out", str(tmp_path / "d")], cwd=ROOT,
+                         capture_output=True, text=True)
+    assert res.returncode == 2 and "--init-partial needs --init" in res.stderr

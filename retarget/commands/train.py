@@ -12,6 +12,7 @@ retarget train --config configs/train/default.yaml --out runs/default --resume
 retarget train --config configs/train/no_bp.yaml --steps 1500 --max-minutes 0 --out runs/no_bp  # fixed step budget
 torchrun --nproc_per_node 2 -m retarget.cli train --config configs/train/tiny.yaml --out runs/ddp
 retarget train --rig my_rig.npz --init runs/default/model.pt --out runs/mine    # fine-tune
+retarget train --config realistic --init runs/default/model.pt --init-partial --out runs/new  # new design, warm start
 retarget train --rig ICT-FaceKit/FaceXModel --keep-vertices 0:11248 --init model.pt --out runs/ict"""
 
 
@@ -22,6 +23,11 @@ def add_arguments(p):
     p.add_argument("--out", required=True, help="run folder: last.pt, model.pt, train_log.csv")
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt if present")
     p.add_argument("--init", help="initialise the weights from this checkpoint (fine-tuning)")
+    p.add_argument("--init-partial", action="store_true",
+                   help="with --init and a --config whose model differs from the checkpoint's (a "
+                        "new design): copy the weights whose names and shapes fit, widen the "
+                        "expression encoder's input for the neutral channels, start the rest "
+                        "fresh (listed)")
     p.add_argument("--rig", help="fine-tune on this blendshape rig: an npz (neutral, faces, names, "
                                  "deltas) or a folder (neutral.obj + one OBJ per ICT/ARKit shape, "
                                  "or ICT-FaceKit's FaceXModel)")
@@ -87,20 +93,35 @@ def training_config(args) -> tuple[dict, str]:
     return cfg, path
 
 
+def describe_warm_start(init: str, report: dict) -> str:
+    """One paragraph for --init-partial: how many tensors were copied, widened and started fresh
+    (the fresh ones' module names)."""
+    fresh = sorted({name.rsplit(".", 1)[0].split(".")[0] for name in report["fresh"]})
+    return (f"warm start from {init}: {len(report['copied'])} tensors copied, "
+            f"{len(report['widened'])} widened ({', '.join(report['widened']) or 'none'}), "
+            f"{len(report['fresh'])} fresh ({', '.join(fresh) or 'none'})")
+
+
 def run(args) -> int:
     from ..train import Trainer, check_run_folder, shutdown_distributed
     from ..user_rig import UnknownShapeWarning
 
+    from ..errors import RetargetError
+
+    if args.init_partial and not args.init:
+        raise RetargetError("--init-partial needs --init CHECKPOINT (the weights to start from)")
     out = Path(args.out)
     check_run_folder(out, args.resume)
     cfg, config_path = training_config(args)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UnknownShapeWarning)
         trainer = Trainer(cfg, out, config_path=config_path, init=args.init,
-                          progress=not args.no_progress)
+                          progress=not args.no_progress, init_partial=args.init_partial)
     if trainer.rank == 0:
         for w in caught:  # e.g. the rig's shapes left out: one line, not a Python warning
             print(f"warning: {w.message}", file=sys.stderr)
+    if trainer.rank == 0 and trainer.init_report is not None:
+        print(describe_warm_start(args.init, trainer.init_report))
     if args.resume and trainer.resume():
         print(f"resumed {out / 'last.pt'} at step {trainer.step}")
     metrics = trainer.run()
