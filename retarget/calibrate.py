@@ -20,9 +20,9 @@ from data_synth.identity import mean_identity
 from data_synth.rig import build_rig
 from data_synth.tessellate import tessellate
 
-from .errors import RetargetError
 
-DEFAULT_RIG = Path(__file__).resolve().parents[1].parent / "shared" / "rigs" / "makehuman_arkit.npz"
+# the packaged copy of the MakeHuman ARKit rig (MIT; data_synth/makehuman/data/LICENSES.md)
+DEFAULT_RIG = Path(__file__).resolve().parents[1] / "data_synth" / "makehuman" / "data" / "makehuman_arkit.npz"
 FACE_SLAB_CM = 7.0        # face width: x extent of the vertices within this depth of the nose tip
 FRONT_DEPTH_CM = 10.0     # area fractions are taken over the vertices within this depth
 MOVED_CM = 0.1            # "moved" threshold (1 mm)
@@ -81,26 +81,15 @@ def shape_stats(verts, faces, delta) -> ShapeStats:
     return ShapeStats(float(mag.max()), moved, direction)
 
 
-def load_real_rig(path) -> dict:
-    """neutral (V,3), faces (F,3), names (52,), deltas (52,V,3) of the real ARKit rig."""
-    path = Path(path)
-    if not path.is_file():
-        raise RetargetError(f"{path}: real rig not found (give --rig)")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            rig = {k: data[k] for k in ("neutral", "faces", "names", "deltas")}
-    except (OSError, ValueError, KeyError) as e:
-        raise RetargetError(f"{path}: not a readable ARKit rig npz ({e})") from None
-    return rig
-
-
 def compare(rig_path=DEFAULT_RIG, n_vertices: int = 12000) -> list[Row]:
     """One Row per ARKit shape with an ICT counterpart (51), procedural head scaled to the real one."""
-    real = load_real_rig(rig_path)
-    names = [str(n) for n in real["names"]]
+    from .evaluate import RealRig
+
+    real = RealRig.load(rig_path, hint="give --rig")
+    names = list(real.names)
     tess = tessellate(n_vertices, kind="adaptive", region="full", holes=True)
     proc = build_rig(mean_identity(), tess)
-    scale = face_width(real["neutral"]) / face_width(proc.neutral)
+    scale = face_width(real.neutral) / face_width(proc.neutral)
     p_verts = proc.neutral.astype(np.float64) * scale
     rows = []
     for arkit in ARKIT_NAMES:
@@ -108,8 +97,8 @@ def compare(rig_path=DEFAULT_RIG, n_vertices: int = 12000) -> list[Row]:
         if not ict:
             continue
         p_delta = scale * sum(proc.deltas[FACS_INDEX[n]].astype(np.float64) for n in ict)
-        r_delta = real["deltas"][names.index(arkit)].astype(np.float64)
-        rows.append(Row(arkit, ict, shape_stats(real["neutral"].astype(np.float64), real["faces"], r_delta),
+        r_delta = real.deltas[names.index(arkit)].astype(np.float64)
+        rows.append(Row(arkit, ict, shape_stats(real.neutral.astype(np.float64), real.faces, r_delta),
                         shape_stats(p_verts, proc.faces, p_delta)))
     return rows
 

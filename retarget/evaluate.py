@@ -75,6 +75,7 @@ from data_synth.tessellate import tessellate
 from .canonical import FRAMES, Canonicaliser
 from .config import configs_dir, find_config, merge, read_yaml
 from .errors import RetargetError
+from .io import regular_file
 from .mesh import Mesh
 from .metrics import segment_mse_mm2, second_difference_jitter_mm, squared_errors_mm2, weight_mae
 from .oracle import closest_point_transfer, displacement_transfer, uv_transfer_matrix
@@ -200,11 +201,12 @@ class RealRig:
     segments: None = None
 
     @classmethod
-    def load(cls, path) -> "RealRig":
-        path = Path(path)
-        if not path.is_file():
-            raise RetargetError(f"{path}: real rig not found (set real_rig.path in the eval config "
-                                f"or pass --real-rig)")
+    def load(cls, path, hint: str = "set real_rig.path in the eval config or pass --real-rig"
+             ) -> "RealRig":
+        """The rig of an npz with neutral (V,3), deltas (K,V,3), faces (F,3), names (K,), in cm;
+        RetargetError naming the file (``hint``: how to give another) when it is missing, not a
+        regular file or not such an npz."""
+        path = regular_file(path, "real rig", missing=f"real rig not found ({hint})")
         try:
             with np.load(path, allow_pickle=False) as d:
                 rig = cls(d["neutral"].astype(np.float32), d["deltas"].astype(np.float32),

@@ -435,4 +435,12 @@ def test_other_commands_refuse_special_names(capsys, good, tmp_path, monkeypatch
     refused(capsys, ["train", "--rig", tmp_path / "rig.npz", "--init", good / "tiny.pt", "--steps", "1",
                      "--out", tmp_path / "run"], [tmp_path / "rig.npz"], "is a named pipe (FIFO)", good,
             tmp_path, bundled=True)
+    refused(capsys, ["eval", "--checkpoint", f"tiny={good / 'tiny.pt'}", "--config", "tiny",
+                     "--suite", "real_rig", "--real-rig", tmp_path / "rig.npz", "--out",
+                     tmp_path / "eval"], [tmp_path / "rig.npz"], "is a named pipe (FIFO)", good,
+            tmp_path)
+    capsys.readouterr()
+    assert main(["calibrate", "--rig", str(tmp_path / "rig.npz")]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "rig.npz") in err and "is a named pipe (FIFO)" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.yaml", "rig.npz"]

@@ -11,7 +11,7 @@ def add_arguments(p):
     from ..calibrate import DEFAULT_RIG
 
     p.add_argument("--rig", default=str(DEFAULT_RIG),
-                   help="real ARKit rig npz (default ../shared/rigs/makehuman_arkit.npz beside the repo)")
+                   help="real ARKit rig npz (default: the packaged MakeHuman ARKit rig)")
     p.add_argument("--n-vertices", type=int, default=12000,
                    help="vertices of the procedural head (default 12000)")
     p.add_argument("--out", help="also write the table and summary to this markdown file")
