@@ -311,12 +311,13 @@ def check_vertex_budget(n_vertices: int, path, limit: int = MAX_VERTICES, force:
 
 
 def load_mesh(path, up: str | None = None, forward: str | None = None, force: bool = False,
-              max_vertices: int = MAX_VERTICES) -> Mesh:
+              max_vertices: int = MAX_VERTICES, check_parts: bool = True) -> Mesh:
     """Read and validate a triangle mesh.
 
     path: .obj, .ply, .off, .glb or .gltf. up/forward: the file's axes (e.g. up="+z", forward="-y")
     if they are not the project's +y up / +z forward; the mesh is rotated into the project frame.
-    Meshes above ``max_vertices`` are refused before parsing unless ``force``.
+    Meshes above ``max_vertices`` are refused before parsing unless ``force``. ``check_parts``:
+    warn when the file looks like two heads (:func:`warn_if_several_heads`).
     Returns Mesh(vertices (V,3) float64 in the file's units, faces (F,3) int64, name=str(path)).
     """
     path = regular_file(path, "mesh file")
@@ -336,7 +337,8 @@ def load_mesh(path, up: str | None = None, forward: str | None = None, force: bo
         reason = f"{type(e).__name__}: {e}".splitlines()[0]
         raise RetargetError(f"{path}: cannot read as {ext[1:].upper()} ({reason})") from None
     mesh = check_mesh(Mesh(verts, faces, name=str(path)), path)
-    warn_if_several_heads(mesh, path)
+    if check_parts:
+        warn_if_several_heads(mesh, path)
     if up is not None or forward is not None:
         mesh = Mesh(mesh.vertices @ axis_rotation(up, forward).T, mesh.faces, mesh.name)
     return mesh
@@ -591,14 +593,15 @@ def load_sequence(spec, up: str | None = None, forward: str | None = None,
     ``force``: read frames above the vertex limit anyway (see :func:`load_mesh`).
 
     All frames must share the first frame's vertex count and face array (RetargetError naming the
-    first offending file). Shows a progress bar for long sequences on a terminal.
+    first offending file). Shows a progress bar for long sequences on a terminal. The two-heads
+    check runs on the first frame only (the frames share its parts): one warning, not one a frame.
     """
     from tqdm import tqdm
 
     files = sequence_files(spec)
     frames = []
     for f in tqdm(files, desc="reading frames", unit="frame", disable=True if len(files) < 20 else None):
-        mesh = load_mesh(f, up=up, forward=forward, force=force)
+        mesh = load_mesh(f, up=up, forward=forward, force=force, check_parts=not frames)
         if frames:
             first = frames[0]
             if mesh.n_vertices != first.n_vertices:

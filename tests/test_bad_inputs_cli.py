@@ -420,6 +420,11 @@ def test_a_huge_take_is_refused_before_any_work(capsys, good, tmp_path, monkeypa
     monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 10**6, 10**6))
     refused(capsys, ["animate", good / "target.obj", "--weights", big, "-o", out / "frames"],
             [out / "frames"], "GB free", good, out)
+    monkeypatch.setattr(api_module.Retargeter, "expression_codes",
+                        lambda *a, **k: pytest.fail("work was started"))
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 10, 10))
+    refused(capsys, ["transfer", good / "source.obj", good / "target.obj", "-o", out / "t.obj"],
+            [out / "t.obj"], "1 frame(s) of 162 vertices would take about", good, out)
 
 
 def test_other_commands_refuse_special_names(capsys, good, tmp_path, monkeypatch, no_hang):

@@ -347,6 +347,14 @@ def test_two_heads_in_one_file_give_a_warning(tmp_path):
         load_mesh(tmp_path / "eyes.obj")  # a head and a small part: no warning
     with pytest.warns(SeveralHeadsWarning, match=r"two\.obj: holds 2 disconnected parts.*162 and 162"):
         load_mesh(tmp_path / "two.obj")
+    take = tmp_path / "take"
+    take.mkdir()
+    for i in range(3):
+        (take / f"frame_{i:04d}.obj").write_bytes((tmp_path / "two.obj").read_bytes())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_sequence(take)
+    assert [str(w.message).split(":")[0] for w in caught] == [str(take / "frame_0000.obj")]
 
 
 def test_a_killed_writers_leftovers_are_removed_by_the_next_write(tmp_path):

@@ -31,6 +31,8 @@ def run(args) -> int:
     frames = load_sequence(args.source, up=args.up, forward=args.forward, force=args.force)
     output_paths(args.out, len(frames), inputs, args.format)
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
+    output_paths(args.out, len(frames), inputs, args.format, target.n_vertices,   # the take's
+                 len(target.faces), args.force)                                   # size, up front
     neutral = load_source_neutral(args, frames)
     r = retargeter(args)
     tgt = r.prepare(target)
