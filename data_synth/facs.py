@@ -5,6 +5,7 @@ The ICT order (alphabetical, as in ICT-FaceKit ``vertex_indices.json``) is the o
 ARKit uses camelCase with ``Left``/``Right``; ``browInnerUp`` and ``cheekPuff`` drive both ICT
 halves, ``tongueOut`` has no ICT shape.
 """
+import numpy as np
 
 FACS_NAMES = (
     "browDown_L", "browDown_R", "browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R",
@@ -60,3 +61,28 @@ def ict_to_arkit(name: str) -> str:
     if side in ("L", "R") and base:
         return base + ("Left" if side == "L" else "Right")
     return name
+
+
+def left_weight(x, centre: float, half_band: float) -> np.ndarray:
+    """(V,) float32 in [0,1]: 1 on the character's left (x > centre + half_band), 0 on the right
+    (x < centre - half_band), a smoothstep between; x (V,) the vertices' x coordinates."""
+    t = np.clip(0.5 + 0.5 * (np.asarray(x, np.float64) - centre) / half_band, 0.0, 1.0)
+    return (t * t * (3.0 - 2.0 * t)).astype(np.float32)
+
+
+def split_to_ict(shapes, left: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Shapes as (ICT slot indices, delta (V,3)) pairs -> (deltas (53,V,3) float32 in ICT order,
+    present (53,) bool). A shape with one slot fills it; one with two (ARKit ``browInnerUp``,
+    ``cheekPuff``: the ``_L`` slot first) is split by ``left`` (V,) (:func:`left_weight`) into
+    delta·left and delta·(1 - left); one with none (``tongueOut``) is left out."""
+    left = np.asarray(left, np.float32)[:, None]
+    deltas = np.zeros((N_FACS, len(left), 3), np.float32)
+    present = np.zeros(N_FACS, bool)
+    for idx, d in shapes:
+        d = np.asarray(d, np.float32)
+        if len(idx) == 2:
+            deltas[idx[0]], deltas[idx[1]] = d * left, d * (1.0 - left)
+        elif len(idx) == 1:
+            deltas[idx[0]] = d
+        present[list(idx)] = True
+    return deltas, present

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from data_synth.facs import ARKIT_NAMES, FACS_INDEX, N_FACS, arkit_to_ict
+from data_synth.facs import ARKIT_NAMES, FACS_INDEX, N_FACS, arkit_to_ict, left_weight, split_to_ict
 
 from .errors import RetargetError
 from .io import load_mesh, regular_file
@@ -227,18 +227,8 @@ def ict_deltas(named: dict, neutral: np.ndarray, where) -> tuple[np.ndarray, np.
 
     A name feeding two ICT slots (ARKit browInnerUp, cheekPuff) is split between them by
     :func:`side_weights` of the neutral (V,3)."""
-    deltas = np.zeros((N_FACS, *neutral.shape), np.float32)
-    present = np.zeros(N_FACS, bool)
-    left = None
-    for name, idx in ict_slots(named, where).items():
-        d = np.asarray(named[name], np.float32)
-        if len(idx) == 2:
-            left = side_weights(neutral) if left is None else left
-            deltas[idx[0]], deltas[idx[1]] = d * left[:, None], d * (1.0 - left[:, None])
-        elif idx:
-            deltas[idx[0]] = d
-        present[list(idx)] = True
-    return deltas, present
+    slots = ict_slots(named, where)
+    return split_to_ict(((slots[n], named[n]) for n in slots), side_weights(neutral))
 
 
 def side_weights(neutral: np.ndarray) -> np.ndarray:
@@ -246,8 +236,7 @@ def side_weights(neutral: np.ndarray) -> np.ndarray:
     centre, 0 on the right, a smoothstep across a band ``MIDLINE_BAND`` of the x extent wide."""
     x = np.asarray(neutral, np.float64)[:, 0]
     lo, hi = x.min(), x.max()
-    t = np.clip((x - 0.5 * (lo + hi)) / (MIDLINE_BAND * max(hi - lo, 1e-12)) + 0.5, 0.0, 1.0)
-    return (t * t * (3.0 - 2.0 * t)).astype(np.float32)
+    return left_weight(x, 0.5 * (lo + hi), 0.5 * MIDLINE_BAND * max(hi - lo, 1e-12))
 
 
 def keep_range(rig: UserRig, spec: str) -> UserRig:

@@ -20,7 +20,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..facs import ARKIT_NAMES, FACS_INDEX, N_FACS, arkit_to_ict
+from ..facs import ARKIT_NAMES, FACS_INDEX, N_FACS, arkit_to_ict, left_weight, split_to_ict
 from . import assets
 from .transfer import deformation_transfer
 
@@ -45,25 +45,11 @@ UNIT_TO_ICT = {
 MIDLINE_CM = 1.0   # half width of the blend across the mid-plane x = 0 when a shape is split
 
 
-def side_weight(x: np.ndarray) -> np.ndarray:
-    """(V,) in [0,1]: 1 on the character's left (x > MIDLINE_CM), 0 on the right, smooth between."""
-    t = np.clip(0.5 + 0.5 * np.asarray(x, np.float64) / MIDLINE_CM, 0.0, 1.0)
-    return (t * t * (3.0 - 2.0 * t)).astype(np.float32)
-
-
 def _to_ict(named: dict[str, tuple[str, ...]], deltas: np.ndarray, x: np.ndarray):
-    """Shapes (K,V,3) whose names map to ICT slots -> ((53,V,3) float32, present (53,) bool)."""
-    out = np.zeros((N_FACS, *deltas.shape[1:]), np.float32)
-    present = np.zeros(N_FACS, bool)
-    left = side_weight(x)[:, None]
-    for d, slots in zip(deltas, named.values()):
-        if len(slots) == 2:
-            out[FACS_INDEX[slots[0]]] = d * left
-            out[FACS_INDEX[slots[1]]] = d * (1 - left)
-        elif len(slots) == 1:
-            out[FACS_INDEX[slots[0]]] = d
-        present[[FACS_INDEX[s] for s in slots]] = True
-    return out, present
+    """Shapes (K,V,3) whose names map to ICT slots -> ((53,V,3) float32, present (53,) bool); a
+    shape feeding both halves is split across the mid-plane x = 0 over ±MIDLINE_CM."""
+    slots = [tuple(FACS_INDEX[s] for s in names) for names in named.values()]
+    return split_to_ict(zip(slots, deltas), left_weight(x, 0.0, MIDLINE_CM))
 
 
 @lru_cache(maxsize=1)
