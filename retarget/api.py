@@ -138,6 +138,14 @@ def _digest(array: np.ndarray) -> str:
     return hashlib.blake2b(np.ascontiguousarray(array).tobytes(), digest_size=16).hexdigest()
 
 
+def _ridge_factor(a: np.ndarray, prior: float) -> tuple[np.ndarray, float]:
+    """For the rows Aᵀ (K, n) of a linear model: (upper-triangular R (K,K) with RᵀR = AᵀA + λI,
+    λ = ``prior`` · mean diag(AᵀA))."""
+    gram = a.astype(np.float64) @ a.T.astype(np.float64)
+    ridge = prior * float(np.trace(gram)) / len(a) + 1e-12
+    return np.linalg.cholesky(gram + ridge * np.eye(len(a))).T, ridge
+
+
 @dataclass
 class SourceRig:
     """The decoder's own rig on a source neutral, for analysis-by-synthesis (``Retargeter.refine``).
@@ -145,7 +153,9 @@ class SourceRig:
     target: the source neutral prepared as a target; baked: its 53 decoded one-hot shapes (source
     units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; chol: (53,53) upper-triangular R
     with RᵀR = AᵀA + λI and λ = ``prior`` · mean diag(AᵀA), the pull towards the encoder's
-    estimate. Made once per neutral.
+    estimate. With the basis decoder also free_basis: F (code_dim − 53, 3V) float32, the rig's
+    columns of the free dims of z_GE (source units), with its own factor free_chol and ridge
+    free_ridge (``fit_free``); None for the MLP decoder. Made once per neutral.
     """
 
     target: Target
@@ -153,13 +163,33 @@ class SourceRig:
     basis: np.ndarray
     chol: np.ndarray
     ridge: float
+    free_basis: np.ndarray | None = None
+    free_chol: np.ndarray | None = None
+    free_ridge: float = 0.0
 
     @classmethod
-    def make(cls, target: Target, baked: BakedRig, prior: float) -> "SourceRig":
+    def make(cls, target: Target, baked: BakedRig, prior: float,
+             free: np.ndarray | None = None) -> "SourceRig":
+        """free: (code_dim − 53, V, 3) the basis decoder's shapes of the free dims in source units."""
         a = np.ascontiguousarray(baked.deltas.reshape(N_FACS, -1), np.float32)   # Aᵀ (53, 3V)
-        gram = a.astype(np.float64) @ a.T.astype(np.float64)
-        ridge = prior * float(np.trace(gram)) / N_FACS + 1e-12
-        return cls(target, baked, a, np.linalg.cholesky(gram + ridge * np.eye(N_FACS)).T, ridge)
+        chol, ridge = _ridge_factor(a, prior)
+        rig = cls(target, baked, a, chol, ridge)
+        if free is not None:
+            rig.free_basis = np.ascontiguousarray(free.reshape(len(free), -1), np.float32)
+            rig.free_chol, rig.free_ridge = _ridge_factor(rig.free_basis, prior)
+        return rig
+
+    def fit_free(self, frame: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """The free dims f (code_dim − 53,) float32 of z_GE = [w, f] minimising
+        |neutral + w·deltas + f·F − frame|² + λ_f |f|² with the weights w (53,) held: ridge least
+        squares on the basis decoder's own rig, exact (what the gradient steps of the MLP decoder
+        approximate, see ``Retargeter.refine``). frame (V,3) in the source's units."""
+        from scipy.linalg import solve_triangular
+
+        r = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1) - w @ self.basis
+        h = (self.free_basis @ r).astype(np.float64)
+        f = solve_triangular(self.free_chol, solve_triangular(self.free_chol, h, trans="T"))
+        return f.astype(np.float32)
 
     def fit(self, frame: np.ndarray, w0: np.ndarray) -> np.ndarray:
         """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|²: frame
@@ -360,16 +390,24 @@ class Retargeter:
             target = self.prepare(source_neutral)
             while len(self._source_rigs) >= self.SOURCE_RIGS_KEPT:
                 self._source_rigs.pop(next(iter(self._source_rigs)))
-            self._source_rigs[key] = SourceRig.make(target, self.bake(target), self.REFINE_PRIOR)
+            free = None
+            if target.codes.basis is not None:     # the basis decoder: its free dims' shapes too
+                free = target.proxy.canon.displacement_from_canonical(
+                    target.codes.basis[:, :, N_FACS:].permute(2, 0, 1).cpu().numpy())
+            self._source_rigs[key] = SourceRig.make(target, self.bake(target), self.REFINE_PRIOR,
+                                                    free)
         return self._source_rigs[key]
 
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray) -> np.ndarray:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); the code becomes [w, 0] and, with
-        ``refine_steps`` > 0, its free dims are then fitted by that many Adam steps through the
-        decoder on the source neutral (``REFINE_ROWS`` fixed vertices). frames: a Mesh or a list
-        sharing the neutral's topology; z_ge (128,) or (T,128) -> the same shape, float32."""
+        ``refine_steps`` > 0, its free dims are then fitted to what the weights leave, the weights
+        held: for the basis decoder exactly, by ridge least squares on its rig
+        (``SourceRig.fit_free``; the number of steps does not matter), for the MLP decoder by
+        that many Adam steps through the decoder on the source neutral (``REFINE_ROWS`` fixed
+        vertices). frames: a Mesh or a list sharing the neutral's topology; z_ge (128,) or (T,128)
+        -> the same shape, float32."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
                                 "--source-neutral on the command line)")
@@ -379,7 +417,9 @@ class Retargeter:
         out = np.zeros_like(z)
         for i, frame in enumerate(frames):
             out[i, :N_FACS] = rig.fit(frame.vertices, np.clip(z[i, :N_FACS], 0.0, 1.0))
-            if self.refine_steps > 0:
+            if self.refine_steps > 0 and rig.free_basis is not None:
+                out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
+            elif self.refine_steps > 0:
                 out[i, N_FACS:] = self._refine_free_dims(rig, frame.vertices, out[i, :N_FACS])
         return out.reshape(np.shape(z_ge))
 

@@ -171,6 +171,38 @@ def test_refine_steps_fit_the_free_dims(rig, weights):
     np.testing.assert_array_equal(z, again)
 
 
+def test_basis_decoder_fits_the_free_dims_exactly_on_its_own_rig(rig, weights):
+    torch.manual_seed(0)
+    model = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2,
+                                      neutral_channels=True))
+    r = Retargeter(model, device="cpu", refine_steps=1)
+    neutral = Mesh(rig.neutral, rig.faces)
+    src = r.source_rig(neutral)
+    assert src.free_basis.shape == (model.cfg.code_dim - 53, 3 * len(rig.neutral))
+    z = np.random.default_rng(2).normal(size=model.cfg.code_dim).astype(np.float32)
+    z[:53] = weights[0]
+    flat = lambda x: np.asarray(x, np.float64).reshape(-1)
+    # the rig's columns are what the decoder does with each dim of z_GE
+    decoded = r.decode(neutral, z)
+    by_rig = rig.neutral + (z[:53] @ src.basis + z[53:] @ src.free_basis).reshape(-1, 3)
+    np.testing.assert_allclose(decoded, by_rig, atol=1e-4 * np.abs(decoded - rig.neutral).max())
+    frame = Mesh(decoded, rig.faces)
+    out = r.expression_codes([frame], source_neutral=neutral, refine=True)[0]
+    w, f = out[:53], out[53:]
+    plain = Retargeter(model, device="cpu").expression_codes([frame], source_neutral=neutral,
+                                                              refine=True)[0]
+    np.testing.assert_array_equal(w, plain[:53])                 # the weights are plain refine's
+    # f solves the ridge normal equations Fᵀ(F f − residual) + λ f = 0 (the weights held) ...
+    resid = flat(frame.vertices - rig.neutral) - flat(w @ src.basis)
+    F = src.free_basis.astype(np.float64)
+    grad = F @ (F.T @ f - resid) + src.free_ridge * f
+    assert np.abs(grad).max() < 1e-3 * np.abs(F @ resid).max()
+    # ... so the frame is explained better than with the free dims at 0
+    err = lambda code: np.square(flat(frame.vertices - rig.neutral)
+                                 - flat(code[:53] @ src.basis + code[53:] @ src.free_basis)).sum()
+    assert err(out) < 0.5 * err(np.concatenate([w, np.zeros_like(f)]))
+
+
 # ------------------------------------------------------------------------------- CLI and eval
 @pytest.fixture(scope="module")
 def files(tmp_path_factory, rig, weights):
