@@ -401,12 +401,11 @@ class Retargeter:
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray) -> np.ndarray:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
-        weights z_GE[:53] as the prior (``SourceRig.fit``); the code becomes [w, 0] and, with
-        ``refine_steps`` > 0, its free dims are then fitted to what the weights leave, the weights
-        held: for the basis decoder exactly, by ridge least squares on its rig
-        (``SourceRig.fit_free``; the number of steps does not matter), for the MLP decoder by
-        that many Adam steps through the decoder on the source neutral (``REFINE_ROWS`` fixed
-        vertices). frames: a Mesh or a list sharing the neutral's topology; z_ge (128,) or (T,128)
+        weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
+        fitted to what the weights leave, the weights held: for the basis decoder always and
+        exactly, by ridge least squares on its rig (``SourceRig.fit_free``), for the MLP decoder
+        by ``refine_steps`` Adam steps through the decoder on the source neutral (``REFINE_ROWS``
+        fixed vertices; 0 = the code is [w, 0]). frames: a Mesh or a list sharing the neutral's topology; z_ge (128,) or (T,128)
         -> the same shape, float32."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
@@ -417,7 +416,7 @@ class Retargeter:
         out = np.zeros_like(z)
         for i, frame in enumerate(frames):
             out[i, :N_FACS] = rig.fit(frame.vertices, np.clip(z[i, :N_FACS], 0.0, 1.0))
-            if self.refine_steps > 0 and rig.free_basis is not None:
+            if rig.free_basis is not None:
                 out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             elif self.refine_steps > 0:
                 out[i, N_FACS:] = self._refine_free_dims(rig, frame.vertices, out[i, :N_FACS])

@@ -34,8 +34,8 @@ def add_neutral_args(p) -> None:
                    help="analysis-by-synthesis: fit the weights to each frame on the decoder's rig "
                         "baked on the source neutral (bounded least squares; needs --source-neutral)")
     p.add_argument("--refine-steps", type=int, default=0, metavar="N",
-                   help="with --refine, then fit the free dims of z_GE too: N gradient steps through an "
-                        "MLP decoder; any N > 0 solves them exactly for a basis decoder (default 0)")
+                   help="with --refine and an MLP decoder, then fit the free dims of z_GE by N gradient "
+                        "steps (default 0); a basis decoder always solves them exactly")
 
 
 def check_neutral_args(args) -> None:

@@ -24,8 +24,8 @@ def add_arguments(p):
                    "not given), neutral (given: the default), refine (given, plus "
                    "analysis-by-synthesis on the source's baked rig)")
     p.add_argument("--refine-steps", type=int, default=0, metavar="N",
-                   help="mode refine: then fit the free dims of z_GE too (N gradient steps for an MLP "
-                        "decoder, an exact solve for a basis decoder when N > 0; default 0)")
+                   help="mode refine, MLP decoder: then N gradient steps on the free dims of z_GE "
+                        "(default 0; a basis decoder always solves them exactly)")
     p.add_argument("--config", help="eval config overriding configs/eval/default.yaml "
                                     "(fixed seeds and sizes)")
     p.add_argument("--out", help="folder for eval.json and eval.md")
