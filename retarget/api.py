@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import hashlib
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
@@ -138,12 +138,16 @@ def _digest(array: np.ndarray) -> str:
     return hashlib.blake2b(np.ascontiguousarray(array).tobytes(), digest_size=16).hexdigest()
 
 
-def _ridge_factor(a: np.ndarray, prior: float) -> tuple[np.ndarray, float]:
-    """For the rows Aᵀ (K, n) of a linear model: (upper-triangular R (K,K) with RᵀR = AᵀA + λI,
-    λ = ``prior`` · mean diag(AᵀA))."""
-    gram = a.astype(np.float64) @ a.T.astype(np.float64)
-    ridge = prior * float(np.trace(gram)) / len(a) + 1e-12
-    return np.linalg.cholesky(gram + ridge * np.eye(len(a))).T, ridge
+def _ridge_factor(gram: np.ndarray, prior: float) -> tuple[np.ndarray, float]:
+    """For the Gram matrix AᵀA (K,K) float64 of a linear model: (upper-triangular R (K,K) with
+    RᵀR = AᵀA + λI, λ), λ = ``prior`` · mean diag(AᵀA)."""
+    ridge = prior * float(np.trace(gram)) / len(gram) + 1e-12
+    return np.linalg.cholesky(gram + ridge * np.eye(len(gram))).T, ridge
+
+
+def _gram(a: np.ndarray) -> np.ndarray:
+    """AᵀA (K,K) float64 of the rows Aᵀ (K, n)."""
+    return a.astype(np.float64) @ a.T.astype(np.float64)
 
 
 @dataclass
@@ -151,32 +155,32 @@ class SourceRig:
     """The decoder's own rig on a source neutral, for analysis-by-synthesis (``Retargeter.refine``).
 
     target: the source neutral prepared as a target; baked: its 53 decoded one-hot shapes (source
-    units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; chol: (53,53) upper-triangular R
-    with RᵀR = AᵀA + λI and λ = ``prior`` · mean diag(AᵀA), the pull towards the encoder's
-    estimate. With the basis decoder also free_basis: F (code_dim − 53, 3V) float32, the rig's
-    columns of the free dims of z_GE (source units), with its own factor free_chol and ridge
-    free_ridge (``fit_free``); None for the MLP decoder. Made once per neutral.
+    units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; gram: AᵀA (53,53) float64, whose
+    ridge factors (one per prior, the pull towards the encoder's estimate) are made when first
+    used (factors). With the basis decoder also free_basis: F (code_dim − 53, 3V) float32, the
+    rig's columns of the free dims of z_GE (source units), and its factor free_chol with ridge
+    free_ridge (``fit_free``, prior ``free_prior``); None for the MLP decoder. Made once per
+    neutral.
     """
 
     target: Target
     baked: BakedRig
     basis: np.ndarray
-    chol: np.ndarray
-    ridge: float
+    gram: np.ndarray
     free_basis: np.ndarray | None = None
     free_chol: np.ndarray | None = None
     free_ridge: float = 0.0
+    factors: dict = field(default_factory=dict)
 
     @classmethod
-    def make(cls, target: Target, baked: BakedRig, prior: float,
-             free: np.ndarray | None = None) -> "SourceRig":
+    def make(cls, target: Target, baked: BakedRig, free: np.ndarray | None = None,
+             free_prior: float = 1e-3) -> "SourceRig":
         """free: (code_dim − 53, V, 3) the basis decoder's shapes of the free dims in source units."""
         a = np.ascontiguousarray(baked.deltas.reshape(N_FACS, -1), np.float32)   # Aᵀ (53, 3V)
-        chol, ridge = _ridge_factor(a, prior)
-        rig = cls(target, baked, a, chol, ridge)
+        rig = cls(target, baked, a, _gram(a))
         if free is not None:
             rig.free_basis = np.ascontiguousarray(free.reshape(len(free), -1), np.float32)
-            rig.free_chol, rig.free_ridge = _ridge_factor(rig.free_basis, prior)
+            rig.free_chol, rig.free_ridge = _ridge_factor(_gram(rig.free_basis), free_prior)
         return rig
 
     def fit_free(self, frame: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -191,22 +195,25 @@ class SourceRig:
         f = solve_triangular(self.free_chol, solve_triangular(self.free_chol, h, trans="T"))
         return f.astype(np.float32)
 
-    def fit(self, frame: np.ndarray, w0: np.ndarray) -> np.ndarray:
-        """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|²: frame
-        (V,3) in the source's units, w0 (53,) the encoder's estimate. Bounded least squares
-        (``scipy.optimize.lsq_linear``, BVLS) on the 53×53 reduced system R w ≈ R⁻ᵀ (Aᵀb + λ w0),
-        which has the same minimiser as the full (3V+53)-row problem; the problem is convex, so the
-        estimate enters as the prior, not as a starting point. When the unconstrained minimiser
-        lies in [0,1] it is the answer and BVLS is skipped."""
+    def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float) -> np.ndarray:
+        """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|², λ = prior ·
+        mean diag(AᵀA): frame (V,3) in the source's units, w0 (53,) the encoder's estimate. Bounded
+        least squares (``scipy.optimize.lsq_linear``, BVLS) on the 53×53 reduced system
+        R w ≈ R⁻ᵀ (Aᵀb + λ w0), which has the same minimiser as the full (3V+53)-row problem; the
+        problem is convex, so the estimate enters as the prior, not as a starting point. When the
+        unconstrained minimiser lies in [0,1] it is the answer and BVLS is skipped."""
         from scipy.linalg import solve_triangular
         from scipy.optimize import lsq_linear
 
+        if prior not in self.factors:
+            self.factors[prior] = _ridge_factor(self.gram, prior)
+        chol, ridge = self.factors[prior]
         b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
-        h = (self.basis @ b).astype(np.float64) + self.ridge * w0
-        rhs = solve_triangular(self.chol, h, trans="T")
-        w = solve_triangular(self.chol, rhs)
+        h = (self.basis @ b).astype(np.float64) + ridge * w0
+        rhs = solve_triangular(chol, h, trans="T")
+        w = solve_triangular(chol, rhs)
         if w.min() < 0.0 or w.max() > 1.0:
-            w = lsq_linear(self.chol, rhs, bounds=(0.0, 1.0), method="bvls").x
+            w = lsq_linear(chol, rhs, bounds=(0.0, 1.0), method="bvls").x
         return np.clip(w, 0.0, 1.0).astype(np.float32)       # BVLS may overstep a bound by 1 ulp
 
 
@@ -219,9 +226,13 @@ class Retargeter:
     """
 
     #: Analysis-by-synthesis (``refine``): weight of the pull towards the encoder's estimate,
-    #: relative to the mean squared norm of the baked shapes; source rigs kept baked; vertices
-    #: decoded per gradient step of the free-dims refinement.
+    #: relative to the mean squared norm of the baked shapes — weak for the codes that transfer
+    #: decodes (the source frame explained as well as the rig can), strong for the weights that
+    #: invert returns (the baked one-hot shapes are not exactly the FACS shapes; measured in
+    #: docs/RESULTS.md); source rigs kept baked; vertices decoded per gradient step of the
+    #: free-dims refinement.
     REFINE_PRIOR = 1e-3
+    REFINE_PRIOR_INVERT = 1.0
     SOURCE_RIGS_KEPT = 8
     REFINE_ROWS = 2000
 
@@ -374,8 +385,9 @@ class Retargeter:
         """Inverse rigging: frame(s) -> FACS weights (53,) or (T,53) in ICT order, clipped to [0,1].
         ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames.
         ``refine``: analysis-by-synthesis on the source's own baked rig (needs ``source_neutral``;
-        see ``refine``)."""
-        z = self.expression_codes(frames, source_neutral, smooth, fps, progress, refine)
+        see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT``."""
+        z = self.expression_codes(frames, source_neutral, smooth, fps, progress, refine,
+                                  refine_prior=self.REFINE_PRIOR_INVERT)
         return np.clip(z[..., :N_FACS], 0.0, 1.0).astype(np.float32)
 
     # --------------------------------------------------------------------------- analysis by synthesis
@@ -394,19 +406,21 @@ class Retargeter:
             if target.codes.basis is not None:     # the basis decoder: its free dims' shapes too
                 free = target.proxy.canon.displacement_from_canonical(
                     target.codes.basis[:, :, N_FACS:].permute(2, 0, 1).cpu().numpy())
-            self._source_rigs[key] = SourceRig.make(target, self.bake(target), self.REFINE_PRIOR,
-                                                    free)
+            self._source_rigs[key] = SourceRig.make(target, self.bake(target), free,
+                                                    self.REFINE_PRIOR)
         return self._source_rigs[key]
 
-    def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray) -> np.ndarray:
+    def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
+               prior: float | None = None) -> np.ndarray:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
         fitted to what the weights leave, the weights held: for the basis decoder always and
         exactly, by ridge least squares on its rig (``SourceRig.fit_free``), for the MLP decoder
         by ``refine_steps`` Adam steps through the decoder on the source neutral (``REFINE_ROWS``
-        fixed vertices; 0 = the code is [w, 0]). frames: a Mesh or a list sharing the neutral's topology; z_ge (128,) or (T,128)
-        -> the same shape, float32."""
+        fixed vertices; 0 = the code is [w, 0]). frames: a Mesh or a list sharing the neutral's
+        topology; z_ge (128,) or (T,128) -> the same shape, float32. prior: the weights' pull
+        towards the encoder (default ``REFINE_PRIOR``)."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
                                 "--source-neutral on the command line)")
@@ -415,7 +429,8 @@ class Retargeter:
         rig = self.source_rig(source_neutral)
         out = np.zeros_like(z)
         for i, frame in enumerate(frames):
-            out[i, :N_FACS] = rig.fit(frame.vertices, np.clip(z[i, :N_FACS], 0.0, 1.0))
+            out[i, :N_FACS] = rig.fit(frame.vertices, np.clip(z[i, :N_FACS], 0.0, 1.0),
+                                      self.REFINE_PRIOR if prior is None else prior)
             if rig.free_basis is not None:
                 out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             elif self.refine_steps > 0:
@@ -472,13 +487,14 @@ class Retargeter:
 
     def expression_codes(self, source, source_neutral: Mesh | None = None,
                          smooth: str | None = None, fps: float = 30.0,
-                         progress: bool = False, refine: bool = False) -> np.ndarray:
+                         progress: bool = False, refine: bool = False,
+                         refine_prior: float | None = None) -> np.ndarray:
         """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), refined by
-        analysis-by-synthesis when ``refine`` (``refine``), temporally filtered when ``smooth`` is
-        given (see ``invert``)."""
+        analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior``), temporally
+        filtered when ``smooth`` is given (see ``invert``)."""
         z = self.encode(source, source_neutral, progress)
         if refine:
-            z = self.refine(source, source_neutral, z)
+            z = self.refine(source, source_neutral, z, refine_prior)
         if smooth and z.ndim == 2:
             z = smooth_codes(z, smooth, fps)
         return z

@@ -131,13 +131,16 @@ def test_bounded_least_squares_recovers_the_weights_of_an_exactly_linear_rig(rig
     w[5:10] = 1.0                                                  # on the bounds
     # (a tiny prior: on this coarse rig eyeLookIn_L and eyeLookOut_L are nearly opposite, their
     # sum is almost invisible, and a prior of 1e-6 already decides it)
-    src = SourceRig.make(None, BakedRig(rig.neutral, rig.deltas), prior=1e-10)
+    src = SourceRig.make(None, BakedRig(rig.neutral, rig.deltas))
     start = np.full(53, 0.5, np.float32)
-    fit = src.fit(rig.evaluate(w), start)
+    fit = src.fit(rig.evaluate(w), start, prior=1e-10)
     assert fit.min() >= 0 and fit.max() <= 1
     assert np.abs(fit - w).max() < 1e-3
     # an expression beyond the box is projected into it: the weights stay in [0, 1]
-    far = src.fit(rig.neutral + 3.0 * (rig.evaluate(w) - rig.neutral), start)
+    far = src.fit(rig.neutral + 3.0 * (rig.evaluate(w) - rig.neutral), start, prior=1e-10)
+    # a strong prior keeps the weights near the estimate (what invert uses), a weak one does not
+    near = src.fit(rig.evaluate(w), start, prior=1e3)
+    assert np.abs(near - start).max() < 0.05 < np.abs(fit - start).max()
     assert far.min() >= 0 and far.max() <= 1 and far[5:10].min() == pytest.approx(1.0)
 
 
@@ -146,15 +149,20 @@ def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
     baked = r.source_rig(neutral).baked
     assert r.source_rig(neutral).baked is baked                    # baked once per neutral
     frames = [Mesh(f, rig.faces) for f in baked.evaluate(weights)]
-    w = r.invert(frames, source_neutral=neutral, refine=True)
-    assert w.shape == (3, 53) and w.min() >= 0 and w.max() <= 1
+    z = r.expression_codes(frames, source_neutral=neutral, refine=True)
+    w = z[:, :53]
+    assert z.shape == (3, 128) and w.min() >= 0 and w.max() <= 1 and np.all(z[:, 53:] == 0)
     # the fit explains the frames at least as well as the weights that made them (up to the prior)
     for f, wi, true in zip(frames, w, weights):
         fitted = np.square(baked.evaluate(wi) - f.vertices).sum()
         scale = np.square(f.vertices - baked.neutral).sum()
         assert fitted <= np.square(baked.evaluate(true) - f.vertices).sum() + 1e-2 * scale
-    z = r.expression_codes(frames, source_neutral=neutral, refine=True)
-    assert np.array_equal(z[:, :53], w) and np.all(z[:, 53:] == 0)
+    # invert pulls the weights towards the encoder's with its own, stronger prior
+    inverted = r.invert(frames, source_neutral=neutral, refine=True)
+    np.testing.assert_array_equal(inverted, r.expression_codes(
+        frames, source_neutral=neutral, refine=True, refine_prior=r.REFINE_PRIOR_INVERT)[:, :53])
+    encoder = np.clip(r.invert(frames, source_neutral=neutral), 0, 1)
+    assert np.abs(inverted - encoder).mean() < np.abs(w - encoder).mean()
     with pytest.raises(Exception, match="refine needs the source's neutral"):
         r.invert(frames, refine=True)
 
@@ -189,7 +197,8 @@ def test_basis_decoder_fits_the_free_dims_exactly_on_its_own_rig(rig, weights):
     frame = Mesh(decoded, rig.faces)
     out = r.expression_codes([frame], source_neutral=neutral, refine=True)[0]
     w, f = out[:53], out[53:]
-    plain = src.fit(frame.vertices, np.clip(r.expression_codes([frame], neutral)[0, :53], 0, 1))
+    plain = src.fit(frame.vertices, np.clip(r.expression_codes([frame], neutral)[0, :53], 0, 1),
+                    r.REFINE_PRIOR)
     np.testing.assert_array_equal(w, plain)                      # the weights are the plain fit's
     # f solves the ridge normal equations Fᵀ(F f − residual) + λ f = 0 (the weights held) ...
     resid = flat(frame.vertices - rig.neutral) - flat(w @ src.basis)
