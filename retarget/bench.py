@@ -474,9 +474,11 @@ def to_markdown(results: dict) -> str:
             out.append(f"Inversion modes: invert = with the source neutral, invert_no_neutral = "
                        f"without, invert_refine = with it plus analysis-by-synthesis; baking the "
                        f"source's rig once: {fmt(ref['source_bake_s'])} s, then refine adds "
-                       f"{fmt(ref['added_ms'])} ms a frame (median of Retargeter.refine alone), "
-                       f"{fmt(ref.get(f'added_ms_{REFINE_STEPS}_steps'))} ms with "
-                       f"{REFINE_STEPS} gradient steps on the free dims.\n")
+                       f"{fmt(ref['added_ms'])} ms a frame (median of Retargeter.refine alone"
+                       + (", the free dims solved exactly on the basis decoder's rig)."
+                          if fr["decoder"] == "basis" else
+                          f"), {fmt(ref.get(f'added_ms_{REFINE_STEPS}_steps'))} ms with "
+                          f"{REFINE_STEPS} gradient steps on the free dims.") + "\n")
         missed = {t["target"] for t in results.get("targets", []) if t["device"] == device and not t["met"]}
         for op in [op for op in ("transfer", "animate", "invert")
                    if {f"{op}_fps", f"{op}_call_fps"} & missed]:

@@ -122,9 +122,12 @@ def run(args) -> int:
     print(f"source: {src_desc}; target: {tgt_desc}; {args.frames} frames")
 
     target = r.prepare(tgt_neutral)
-    pred = r.transfer(src_frames, target, source_neutral=src_neutral, progress=True)
+    # with the source's neutral, and analysis-by-synthesis where the decoder is a rig (its free
+    # dims solved exactly; measured better than the encoder alone, docs/RESULTS.md)
+    refine = r.cfg.decoder == "basis"
+    pred = r.transfer(src_frames, target, source_neutral=src_neutral, progress=True, refine=refine)
     gt = tgt_rig.evaluate(weights)
-    inverted = r.invert(src_frames, source_neutral=src_neutral)
+    inverted = r.invert(src_frames, source_neutral=src_neutral, refine=refine)
     rig = r.bake(target)
 
     for t, v in enumerate(pred):
@@ -153,7 +156,8 @@ def run(args) -> int:
     mse0 = mse_mm2(still, gt)
     seg0, _ = segment_mse_mm2(still, gt, tgt_rig.segments, L)
     mae = float(np.abs(inverted - weights).mean())
-    print(f"cross-identity, cross-topology retargeting over {args.frames} frames:")
+    print(f"cross-identity, cross-topology retargeting over {args.frames} frames, with the "
+          f"source's neutral{' and --refine' if refine else ''}:")
     print(f"  MSE {mse:.3f} mm², segment-averaged MSE {seg:.3f} mm² (vs the target rig's exact GT)")
     ratios = f" (ratios {mse / mse0:.2f}, {seg / seg0:.2f})" if min(mse0, seg0) > 0 else ""
     print(f"  doing nothing (target left neutral): MSE {mse0:.3f} mm², segment-averaged "
