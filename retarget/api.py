@@ -138,6 +138,24 @@ def _digest(array: np.ndarray) -> str:
     return hashlib.blake2b(np.ascontiguousarray(array).tobytes(), digest_size=16).hexdigest()
 
 
+def source_frames(frames) -> tuple[list[Mesh], bool]:
+    """(the source frames as Meshes, whether one mesh was given): ``frames`` is one mesh (anything
+    :func:`retarget.mesh.as_mesh` takes) or a list of them. RetargetError for an empty list."""
+    single = is_mesh_like(frames)
+    frames = [frames] if single else list(frames)
+    if not frames:
+        raise RetargetError("no source frames given")
+    return [as_mesh(f, role="source" if single else f"source frame {i}")
+            for i, f in enumerate(frames)], single
+
+
+def basis_shapes(target: "Target", dims: slice) -> np.ndarray:
+    """The basis decoder's rig on a prepared target, the code dims ``dims`` of it, as shapes in the
+    target's units: (K, V, 3) float32 (``dims`` = slice(0, 53): the baked FACS shapes)."""
+    shapes = target.codes.basis[:, :, dims].permute(2, 0, 1).cpu().numpy()
+    return np.ascontiguousarray(target.proxy.canon.displacement_from_canonical(shapes), np.float32)
+
+
 def _ridge_factor(gram: np.ndarray, prior: float) -> tuple[np.ndarray, float]:
     """For the Gram matrix AᵀA (K,K) float64 of a linear model: (upper-triangular R (K,K) with
     RᵀR = AᵀA + λI, λ), λ = ``prior`` · mean diag(AᵀA)."""
@@ -248,7 +266,7 @@ class Retargeter:
         self.source_cache_size = int(source_cache_size)
         self._sources: OrderedDict[tuple, SourceTopology] = OrderedDict()
         self.refine_steps = refine_steps   # gradient steps on the free dims of z_GE after the fit
-        self._source_rigs: dict[str, SourceRig] = {}
+        self._source_rigs: dict[tuple, SourceRig] = {}
 
     @classmethod
     def load(cls, path=None, device=None, **kwargs) -> "Retargeter":
@@ -349,12 +367,7 @@ class Retargeter:
         topology, pass their ``source_neutral`` or clear the cache. ``progress``: a tqdm bar."""
         from tqdm import tqdm
 
-        single = is_mesh_like(frames)
-        frames = [frames] if single else list(frames)
-        if not frames:
-            raise RetargetError("no source frames given")
-        frames = [as_mesh(f, role="source" if single else f"source frame {i}")
-                  for i, f in enumerate(frames)]
+        frames, single = source_frames(frames)
         neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
         ref = neutral or frames[0]
         check_head_like(ref, "source")
@@ -394,18 +407,14 @@ class Retargeter:
     def source_rig(self, source_neutral: Mesh) -> SourceRig:
         """The 53 one-hot shapes decoded on ``source_neutral`` and their factorised normal equations,
         made once per neutral (cached by content, the last ``SOURCE_RIGS_KEPT``)."""
-        import hashlib
-
-        key = hashlib.sha1(np.ascontiguousarray(source_neutral.vertices, np.float64).tobytes()
-                           + np.ascontiguousarray(source_neutral.faces, np.int64).tobytes()).hexdigest()
+        source_neutral = as_mesh(source_neutral, role="source neutral")
+        key = (_digest(source_neutral.vertices), _digest(source_neutral.faces))
         if key not in self._source_rigs:
             target = self.prepare(source_neutral)
             while len(self._source_rigs) >= self.SOURCE_RIGS_KEPT:
                 self._source_rigs.pop(next(iter(self._source_rigs)))
-            free = None
-            if target.codes.basis is not None:     # the basis decoder: its free dims' shapes too
-                free = target.proxy.canon.displacement_from_canonical(
-                    target.codes.basis[:, :, N_FACS:].permute(2, 0, 1).cpu().numpy())
+            free = (basis_shapes(target, slice(N_FACS, None))   # the basis decoder: the free
+                    if target.codes.basis is not None else None)  # dims' shapes too
             self._source_rigs[key] = SourceRig.make(target, self.bake(target), free,
                                                     self.REFINE_PRIOR)
         return self._source_rigs[key]
@@ -424,7 +433,7 @@ class Retargeter:
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
                                 "--source-neutral on the command line)")
-        frames = [frames] if isinstance(frames, Mesh) else list(frames)
+        frames, _ = source_frames(frames)
         z = np.asarray(z_ge, np.float32).reshape(len(frames), -1)
         rig = self.source_rig(source_neutral)
         out = np.zeros_like(z)
@@ -518,10 +527,8 @@ class Retargeter:
         basis decoder it is the decoder's own rig, ``codes.basis`` (exact for FACS-weight codes)."""
         target = self.prepare(target)
         if target.codes.basis is not None:
-            deltas = target.codes.basis[:, :, :N_FACS].permute(2, 0, 1).cpu().numpy()  # (53, V, 3)
-            deltas = target.proxy.canon.displacement_from_canonical(deltas)
             return BakedRig(target.mesh.vertices.astype(np.float32),
-                            np.ascontiguousarray(deltas, dtype=np.float32))
+                            basis_shapes(target, slice(0, N_FACS)))
         shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
         return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
 

@@ -11,18 +11,17 @@ real one after scaling the procedural head to the real head's face width:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from data_synth.facs import ARKIT_NAMES, FACS_INDEX, arkit_to_ict
 from data_synth.identity import mean_identity
+from data_synth.makehuman.assets import DATA_DIR
 from data_synth.rig import build_rig
 from data_synth.tessellate import tessellate
 
-
 # the packaged copy of the MakeHuman ARKit rig (MIT; data_synth/makehuman/data/LICENSES.md)
-DEFAULT_RIG = Path(__file__).resolve().parents[1] / "data_synth" / "makehuman" / "data" / "makehuman_arkit.npz"
+DEFAULT_RIG = DATA_DIR / "makehuman_arkit.npz"
 FACE_SLAB_CM = 7.0        # face width: x extent of the vertices within this depth of the nose tip
 FRONT_DEPTH_CM = 10.0     # area fractions are taken over the vertices within this depth
 MOVED_CM = 0.1            # "moved" threshold (1 mm)

@@ -148,10 +148,7 @@ def warm_start(model: NFSModel, initial: NFSModel) -> dict[str, list[str]]:
                 report["widened"].append(name)
             else:
                 report["fresh"].append(name)
-    model.load_state_dict(new)
-    if not same_decoder:
-        with torch.no_grad():
-            last = model.decoder[-1]
-            last.weight.zero_()
-            last.bias.zero_()
+        if not same_decoder:     # (the state dict's tensors are the model's own: no load needed)
+            model.decoder[-1].weight.zero_()
+            model.decoder[-1].bias.zero_()
     return report

@@ -165,6 +165,13 @@ def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
     assert np.abs(inverted - encoder).mean() < np.abs(w - encoder).mean()
     with pytest.raises(Exception, match="refine needs the source's neutral"):
         r.invert(frames, refine=True)
+    # (vertices, faces) pairs, as every API call takes them, give the same codes
+    pairs = r.expression_codes([(f.vertices, f.faces) for f in frames],
+                               source_neutral=(neutral.vertices, neutral.faces), refine=True)
+    np.testing.assert_array_equal(pairs, z)
+    one = r.expression_codes((frames[0].vertices, frames[0].faces),
+                             source_neutral=(neutral.vertices, neutral.faces), refine=True)
+    np.testing.assert_array_equal(one, z[0])
 
 
 def test_refine_steps_fit_the_free_dims(rig, weights):
