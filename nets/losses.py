@@ -175,6 +175,30 @@ def blendshape_reconstruction_loss(model, feat: torch.Tensor, c: torch.Tensor, c
     return vertex_loss(dv, blend(z_sg[:, :basis.shape[0]], sub))
 
 
+def rig_loss(model, feat: torch.Tensor, c: torch.Tensor, codes, basis: torch.Tensor,
+             rows: torch.Tensor | None = None, shapes: torch.Tensor | None = None) -> torch.Tensor:
+    """L_rig = mean_k ||D(Ψ([e_k, 0], z_Skin)) - B_k||²: the decoder driven by one FACS weight at 1
+    and every other dim of z_GE at 0 draws that shape of the target's rig (beyond the paper: L_BR,
+    eq. 8, with one-hot codes instead of the encoder's). It makes the first 53 dims of the code
+    mean the FACS shapes by themselves, which is what driving from FACS weights, the baked rig and
+    exporting it read. Trains the decoder, skinning block and target codes.
+
+    Args:
+        model: an ``NFSModel``.
+        feat, c, codes: the target: features (V, 6), image code, ``model.encode_target`` codes.
+        basis: (53, V, 3) blendshape deltas of that mesh, in the units of ``feat``'s positions.
+        rows: (n,) int64 vertices to decode, or None for all.
+        shapes: (K,) int64 shape indices to decode, or None for all 53.
+    Returns:
+        Squared distance, mean over the K shapes and the decoded vertices, units².
+    """
+    k = torch.arange(basis.shape[0], device=basis.device) if shapes is None else shapes
+    z = basis.new_zeros(len(k), model.cfg.code_dim)
+    z[torch.arange(len(k), device=z.device), k] = 1.0
+    sub = basis[k] if rows is None else basis[k][:, rows]
+    return vertex_loss(model.decode_target(feat, c, codes, z, rows), sub)
+
+
 def segmentation_nll(z_skin: torch.Tensor, labels: torch.Tensor) -> torch.Tensor:
     """L_nll (eq. 2): binary cross-entropy of z_Skin against one-hot segment labels.
 

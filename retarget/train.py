@@ -55,7 +55,7 @@ DEFAULTS = {
         },
     },
     "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,
-             "bp": 1.0, "br": 1.0, "nll": 1.0, "free_dims_dropout": 0.0},
+             "bp": 1.0, "br": 1.0, "nll": 1.0, "rig": 0.0, "free_dims_dropout": 0.0},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
     "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
               "ckpt_minutes": 5.0},
@@ -212,7 +212,22 @@ def free_dims_dropout(z_ge: torch.Tensor, n_facs: int, p: float, rng: np.random.
 
 
 #: The encoder and segmentation terms added to L_dec, in this order, with their config weights.
-LOSS_WEIGHTS = (("L_ID", "id"), ("L_Exp", "exp"), ("L_BP", "bp"), ("L_BR", "br"), ("L_nll", "nll"))
+LOSS_WEIGHTS = (("L_ID", "id"), ("L_Exp", "exp"), ("L_BP", "bp"), ("L_BR", "br"), ("L_nll", "nll"),
+                ("L_rig", "rig"))
+
+#: Shapes per step that L_rig decodes with the MLP decoder (one decoder pass each); the basis
+#: decoder's rig holds all 53 at no extra cost.
+RIG_SHAPES_MLP = 8
+
+
+def rig_shapes(model: NFSModel, present: np.ndarray | None, rng: np.random.Generator) -> torch.Tensor:
+    """The FACS shape indices (K,) int64 that L_rig decodes this step: the target rig's shapes
+    (``Entry.present``; all 53 when None), all of them for the basis decoder, ``RIG_SHAPES_MLP``
+    drawn at random for the MLP decoder."""
+    have = np.arange(model.cfg.n_facs) if present is None else np.flatnonzero(present)
+    if model.cfg.decoder != "basis" and len(have) > RIG_SHAPES_MLP:
+        have = np.sort(rng.choice(have, RIG_SHAPES_MLP, replace=False))
+    return torch.from_numpy(have.astype(np.int64))
 
 
 def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
@@ -261,6 +276,9 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
         for g, w, s in zip(z_ge, weights, group.sources)]).mean()
     basis_t = torch.from_numpy(tgt.basis).to(device)
     out["L_BR"] = L.blendshape_reconstruction_loss(model, t_feat, c_t, codes, z_br, basis_t, rows)
+    if loss_cfg["rig"] > 0:
+        shapes = rig_shapes(model, tgt.present, rng).to(device)
+        out["L_rig"] = L.rig_loss(model, t_feat, c_t, codes, basis_t, rows, shapes)
     if codes.z_skin is not None and tgt.rig.segments is not None:
         labels = torch.from_numpy(tgt.rig.segments).to(device)
         out["L_nll"] = L.segmentation_nll(codes.z_skin, labels)
@@ -312,7 +330,7 @@ def learning_rate(progress: float, step: int, optim_cfg: dict) -> float:
 
 
 LOG_COLUMNS = ("step", "elapsed_s", "lr", "samples_per_s", "total", "L_dec", "L_v", "L_n", "L_g",
-               "L_ID", "L_Exp", "L_BP", "L_BR", "L_nll", "val_mse_mm2", "val_seg_mse_mm2",
+               "L_ID", "L_Exp", "L_BP", "L_BR", "L_nll", "L_rig", "val_mse_mm2", "val_seg_mse_mm2",
                "val_weight_mae")
 
 
@@ -398,9 +416,13 @@ class Trainer:
         if self.rank != 0:
             return
         path = self.out / "train_log.csv"
-        new = not path.exists()
+        new = not path.exists() or path.stat().st_size == 0
+        columns = LOG_COLUMNS
+        if not new:  # a resumed run keeps its log's columns (a log from before L_rig has none)
+            with open(path, newline="") as f:
+                columns = next(csv.reader(f), None) or LOG_COLUMNS
         with open(path, "a", newline="") as f:
-            w = csv.DictWriter(f, LOG_COLUMNS, extrasaction="ignore")
+            w = csv.DictWriter(f, columns, extrasaction="ignore")
             if new:
                 w.writeheader()
             w.writerow(row)

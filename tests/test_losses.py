@@ -205,3 +205,27 @@ def test_blendshape_reconstruction_loss_known_value_and_subset():
     torch.testing.assert_close(losses.blendshape_reconstruction_loss(
         model, mesh["feat"], c, codes, torch.stack([z, z]), basis, rows), expected_rows,
         rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("decoder", ["mlp", "basis"])
+def test_rig_loss_is_zero_on_the_decoders_own_one_hot_shapes_and_trains_the_decoder(decoder):
+    model = tiny_model(0, decoder=decoder)
+    mesh = make_mesh(1)
+    c = model.image_code(mesh["img"])[0]
+    codes = model.encode_target(mesh["feat"], c, mesh["ops"])
+    one_hot = torch.eye(model.cfg.code_dim)[:53]                      # [e_k, 0]
+    own = model.decode_target(mesh["feat"], c, codes, one_hot).detach()   # (53, V, 3)
+    assert losses.rig_loss(model, mesh["feat"], c, codes, own) < 1e-10
+    other = own.clone()
+    other[7] += torch.tensor([0.0, 0.2, 0.0])                  # shape 7 of the rig moved by 0.2
+    # mean over 53 shapes of |0.2|² on every vertex of shape 7
+    torch.testing.assert_close(losses.rig_loss(model, mesh["feat"], c, codes, other),
+                               torch.tensor(0.04 / 53), rtol=1e-4, atol=1e-7)
+    rows, shapes = torch.arange(0, mesh["feat"].shape[0], 2), torch.tensor([7, 9])
+    torch.testing.assert_close(losses.rig_loss(model, mesh["feat"], c, codes, other, rows, shapes),
+                               torch.tensor(0.04 / 2), rtol=1e-4, atol=1e-7)
+    model.train()
+    codes = model.encode_target(mesh["feat"], c, mesh["ops"])
+    grads = _grads(model, losses.rig_loss(model, mesh["feat"], c, codes, 0.1 * other), "")
+    assert all(g is None for n, g in grads.items() if n.startswith("expression_encoder"))
+    assert any(g is not None and g.abs().sum() > 0 for n, g in grads.items() if n.startswith("decoder"))

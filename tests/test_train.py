@@ -209,12 +209,48 @@ def test_train_command_overrides_the_step_and_time_budget():
     cfg, _ = train_cmd.training_config(p.parse_args(
         ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x"]))
     assert cfg["train"] == load_config(ROOT / "configs/train/default.yaml")["train"]
+    cfg, _ = train_cmd.training_config(p.parse_args(
+        ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--seed", "3"]))
+    assert cfg["train"]["seed"] == 3
+    with pytest.raises(RetargetError, match="--seed"):
+        train_cmd.training_config(p.parse_args(
+            ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--seed", "-1"]))
     with pytest.raises(RetargetError, match="--lr"):
         train_cmd.training_config(p.parse_args(
             ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--lr", "0"]))
     with pytest.raises(RetargetError, match="--max-minutes"):
         train_cmd.training_config(p.parse_args(
             ["--config", str(ROOT / "configs/train/default.yaml"), "--out", "x", "--max-minutes", "-1"]))
+
+
+def test_rig_loss_term_reaches_the_decoder_and_decodes_the_rigs_shapes_only(tmp_path):
+    from retarget.train import RIG_SHAPES_MLP, rig_shapes
+    cfg = tiny_cfg()
+    trainer = Trainer(cfg, tmp_path, progress=False)
+    group = trainer.pool.sample(0)
+    rng = lambda: np.random.default_rng(0)  # noqa: E731
+    assert "L_rig" not in group_losses(trainer.model, group, cfg["loss"], 200, rng(), "cpu")
+
+    def grads(loss_cfg):
+        trainer.model.zero_grad()
+        out = group_losses(trainer.model, group, loss_cfg, 200, rng(), "cpu")
+        out["total"].backward()
+        return out, {n: p.grad.clone() for n, p in trainer.model.named_parameters()
+                     if p.grad is not None and n.startswith("decoder")}
+
+    with_rig, g_rig = grads({**cfg["loss"], "rig": 10.0})
+    _, g_base = grads(cfg["loss"])
+    assert torch.isfinite(with_rig["L_rig"]) and with_rig["L_rig"] > 0
+    assert any(not torch.allclose(g_rig[n], g_base[n]) for n in g_base), "L_rig misses the decoder"
+    present = np.zeros(53, bool)
+    present[[0, 5, 9]] = True
+    basis_model = type("M", (), {"cfg": type("C", (), {"n_facs": 53, "decoder": "basis"})})()
+    mlp_model = type("M", (), {"cfg": type("C", (), {"n_facs": 53, "decoder": "mlp"})})()
+    assert rig_shapes(basis_model, None, rng()).tolist() == list(range(53))
+    assert rig_shapes(basis_model, present, rng()).tolist() == [0, 5, 9]
+    assert rig_shapes(mlp_model, present, rng()).tolist() == [0, 5, 9]
+    drawn = rig_shapes(mlp_model, None, rng())
+    assert len(drawn) == RIG_SHAPES_MLP == len(set(drawn.tolist()))
 
 
 def test_free_dims_dropout_zeroes_the_dims_past_the_weights_of_some_sources():
@@ -283,3 +319,21 @@ def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
                           "--init-partial", "--out", str(tmp_path / "d")], cwd=ROOT,
                          capture_output=True, text=True)
     assert res.returncode == 2 and "--init-partial needs --init" in res.stderr
+
+
+def test_committed_resumable_state_resumes_under_its_config(tmp_path):
+    """training/realistic_rig (the bundled model's run) resumes with the command its README gives:
+    its model is the config's, its optimizer loads, and its step is the last row of its log."""
+    import csv
+    import shutil
+    state_dir = ROOT / "training" / "realistic_rig"
+    run = tmp_path / "next"
+    shutil.copytree(state_dir, run)
+    cfg = load_config(ROOT / "configs" / "train" / "realistic_rig.yaml")
+    cfg["train"]["seed"] = 1
+    trainer = Trainer(cfg, run, progress=False)
+    assert trainer.resume()
+    with open(state_dir / "train_log.csv", newline="") as f:
+        last = list(csv.DictReader(f))[-1]
+    assert trainer.step == int(last["step"]) and trainer.step > 0
+    assert trainer.cfg["loss"]["rig"] > 0

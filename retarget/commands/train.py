@@ -41,6 +41,7 @@ def add_arguments(p):
                    help="fraction of steps drawn from the rig, the rest procedural (default 0.5)")
     p.add_argument("--steps", type=int, help="override train.steps (>= 1)")
     p.add_argument("--lr", type=float, help="override optim.lr (the peak learning rate)")
+    p.add_argument("--seed", type=int, help="override train.seed (samples, validation set, init)")
     p.add_argument("--max-minutes", type=float,
                    help="override train.max_minutes (0 = no time limit: the budget and the "
                         "learning-rate schedule follow --steps only, whatever else runs on the "
@@ -50,8 +51,8 @@ def add_arguments(p):
 
 def training_config(args) -> tuple[dict, str]:
     """(config, its path) from the arguments: --config, or with --rig the fine-tuning config whose
-    model is the --init checkpoint's; --rig, --keep-vertices, --strict, --rig-mix, --steps, --lr and
-    --max-minutes applied."""
+    model is the --init checkpoint's; --rig, --keep-vertices, --strict, --rig-mix, --steps, --lr, --seed
+    and --max-minutes applied."""
     from ..config import find_config
     from ..errors import RetargetError
     from ..train import load_checkpoint, load_config
@@ -86,6 +87,10 @@ def training_config(args) -> tuple[dict, str]:
         if not 0 < args.lr < float("inf"):
             raise RetargetError(f"--lr must be > 0, got {args.lr}")
         cfg["optim"]["lr"] = args.lr
+    if args.seed is not None:
+        if args.seed < 0:
+            raise RetargetError(f"--seed {args.seed}: must be >= 0")
+        cfg["train"]["seed"] = args.seed
     if args.max_minutes is not None:
         if not args.max_minutes >= 0 or args.max_minutes == float("inf"):
             raise RetargetError(f"--max-minutes must be >= 0, got {args.max_minutes}")
