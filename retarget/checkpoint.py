@@ -116,7 +116,8 @@ def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:
     return model
 
 
-def warm_start(model: NFSModel, initial: NFSModel) -> dict[str, list[str]]:
+def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
+               ) -> dict[str, list[str]]:
     """Copy into ``model`` the weights of ``initial``, a model of another config (a new design
     started from a trained one), and return what was done: {"copied": [...], "widened": [...],
     "fresh": [...]} parameter names.
@@ -128,15 +129,25 @@ def warm_start(model: NFSModel, initial: NFSModel) -> dict[str, list[str]]:
     computes what the old one did until training moves it. Everything else keeps its fresh
     initialisation, except a fresh decoder's last layer, which starts at zero: the warm-started
     model first predicts no displacement (doing nothing) rather than a random field whose large
-    first gradients would pull the copied encoders around."""
+    first gradients would pull the copied encoders around.
+
+    ``fresh``: top-level module names (``decoder``, ``skinning_encoder``, ...) to start fresh even
+    where they fit (a same-budget comparison of a new module against a trained one); a fresh
+    decoder's last layer starts at zero as above."""
     old = initial.state_dict()
     new = model.state_dict()
-    same_decoder = model.cfg.decoder == initial.cfg.decoder
+    known = {name.split(".")[0] for name in new}
+    unknown = sorted(set(fresh) - known)
+    if unknown:
+        raise ValueError(f"no module {', '.join(unknown)} in the model (modules: "
+                         f"{', '.join(sorted(known))})")
+    same_decoder = model.cfg.decoder == initial.cfg.decoder and "decoder" not in fresh
     report: dict[str, list[str]] = {"copied": [], "widened": [], "fresh": []}
     with torch.no_grad():
         for name, tensor in new.items():
             src = old.get(name)
-            if src is None or (name.startswith("decoder.") and not same_decoder):
+            if (src is None or (name.startswith("decoder.") and not same_decoder)
+                    or name.split(".")[0] in fresh):
                 report["fresh"].append(name)
             elif src.shape == tensor.shape:
                 tensor.copy_(src)

@@ -338,7 +338,7 @@ class Trainer:
     """Runs one training config into ``out_dir`` (``last.pt``, ``model.pt``, ``train_log.csv``)."""
 
     def __init__(self, cfg: dict, out_dir, config_path: str = "", init=None, progress=True,
-                 init_partial: bool = False):
+                 init_partial: bool = False, init_fresh: tuple[str, ...] = ()):
         self.cfg, self.out = cfg, Path(out_dir)
         check_values(cfg, config_path or "config")
         self.device = pick_device()
@@ -351,7 +351,10 @@ class Trainer:
         if init is not None:
             initial = model_from_checkpoint(load_checkpoint(init), init)
             if init_partial:
-                self.init_report = warm_start(self.model, initial)
+                try:
+                    self.init_report = warm_start(self.model, initial, tuple(init_fresh))
+                except ValueError as e:
+                    raise RetargetError(f"--init-fresh: {e}") from None
             elif initial.cfg != self.model_cfg:
                 raise RetargetError(f"{init}: the checkpoint's model does not match the config's "
                                     f"(model: {cfg['model']}); leave --config out to fine-tune "

@@ -305,6 +305,23 @@ def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_ne
     assert torch.count_nonzero(same.decoder[-1].weight) > 0    # a same-kind decoder keeps its init
 
 
+def test_warm_start_can_start_named_modules_fresh_where_they_fit():
+    from nets.model import NFSConfig, NFSModel
+    from retarget.checkpoint import warm_start
+    torch.manual_seed(0)
+    old = NFSModel(NFSConfig.preset("tiny"))
+    torch.manual_seed(1)
+    new = NFSModel(NFSConfig.preset("tiny"))
+    report = warm_start(new, old, fresh=("decoder",))
+    assert report["fresh"] and all(n.startswith("decoder.") for n in report["fresh"])
+    assert not any(n.startswith("decoder.") for n in report["copied"])
+    assert not torch.equal(new.decoder[0].weight, old.decoder[0].weight)
+    assert torch.count_nonzero(new.decoder[-1].weight) == 0       # starts at doing nothing
+    assert torch.equal(new.skinning_mlp[0].weight, old.skinning_mlp[0].weight)
+    with pytest.raises(ValueError, match="no module dekoder"):
+        warm_start(new, old, fresh=("dekoder",))
+
+
 def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
     Trainer(tiny_cfg(), tmp_path / "a", progress=False).export(tmp_path / "tiny.pt")
     cfg = tiny_cfg(steps=2)
@@ -319,6 +336,10 @@ def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
                           "--init-partial", "--out", str(tmp_path / "d")], cwd=ROOT,
                          capture_output=True, text=True)
     assert res.returncode == 2 and "--init-partial needs --init" in res.stderr
+    res = subprocess.run([sys.executable, "-m", "retarget.cli", "train", "--config", str(TINY),
+                          "--init", str(tmp_path / "tiny.pt"), "--init-fresh", "decoder",
+                          "--out", str(tmp_path / "e")], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 2 and "--init-fresh needs --init-partial" in res.stderr
 
 
 def test_committed_resumable_state_resumes_under_its_config(tmp_path):

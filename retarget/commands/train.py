@@ -28,6 +28,9 @@ def add_arguments(p):
                         "new design): copy the weights whose names and shapes fit, widen the "
                         "expression encoder's input for the neutral channels, start the rest "
                         "fresh (listed)")
+    p.add_argument("--init-fresh", nargs="+", metavar="MODULE", default=(),
+                   help="with --init-partial: start these modules fresh even where they fit (e.g. "
+                        "decoder: compare a new decoder with a trained one at the same budget)")
     p.add_argument("--rig", help="fine-tune on this blendshape rig: an npz (neutral, faces, names, "
                                  "deltas) or a folder (neutral.obj + one OBJ per ICT/ARKit shape, "
                                  "or ICT-FaceKit's FaceXModel)")
@@ -115,13 +118,16 @@ def run(args) -> int:
 
     if args.init_partial and not args.init:
         raise RetargetError("--init-partial needs --init CHECKPOINT (the weights to start from)")
+    if args.init_fresh and not args.init_partial:
+        raise RetargetError("--init-fresh needs --init-partial (it names modules not to copy)")
     out = Path(args.out)
     check_run_folder(out, args.resume)
     cfg, config_path = training_config(args)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UnknownShapeWarning)
         trainer = Trainer(cfg, out, config_path=config_path, init=args.init,
-                          progress=not args.no_progress, init_partial=args.init_partial)
+                          progress=not args.no_progress, init_partial=args.init_partial,
+                          init_fresh=tuple(args.init_fresh))
     if trainer.rank == 0:
         for w in caught:  # e.g. the rig's shapes left out: one line, not a Python warning
             print(f"warning: {w.message}", file=sys.stderr)
