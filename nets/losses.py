@@ -192,9 +192,10 @@ def rig_loss(model, feat: torch.Tensor, c: torch.Tensor, codes, basis: torch.Ten
     Returns:
         Squared distance, mean over the K shapes and the decoded vertices, units².
     """
+    from .model import weights_to_code
+
     k = torch.arange(basis.shape[0], device=basis.device) if shapes is None else shapes
-    z = basis.new_zeros(len(k), model.cfg.code_dim)
-    z[torch.arange(len(k), device=z.device), k] = 1.0
+    z = weights_to_code(F.one_hot(k, basis.shape[0]).to(basis.dtype), model.cfg.code_dim)
     sub = basis[k] if rows is None else basis[k][:, rows]
     return vertex_loss(model.decode_target(feat, c, codes, z, rows), sub)
 

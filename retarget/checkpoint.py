@@ -141,13 +141,12 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
     if unknown:
         raise ValueError(f"no module {', '.join(unknown)} in the model (modules: "
                          f"{', '.join(sorted(known))})")
-    same_decoder = model.cfg.decoder == initial.cfg.decoder and "decoder" not in fresh
+    fresh = set(fresh) | ({"decoder"} if model.cfg.decoder != initial.cfg.decoder else set())
     report: dict[str, list[str]] = {"copied": [], "widened": [], "fresh": []}
     with torch.no_grad():
         for name, tensor in new.items():
             src = old.get(name)
-            if (src is None or (name.startswith("decoder.") and not same_decoder)
-                    or name.split(".")[0] in fresh):
+            if src is None or name.split(".")[0] in fresh:
                 report["fresh"].append(name)
             elif src.shape == tensor.shape:
                 tensor.copy_(src)
@@ -159,7 +158,7 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                 report["widened"].append(name)
             else:
                 report["fresh"].append(name)
-        if not same_decoder:     # (the state dict's tensors are the model's own: no load needed)
+        if "decoder" in fresh:   # (the state dict's tensors are the model's own: no load needed)
             model.decoder[-1].weight.zero_()
             model.decoder[-1].bias.zero_()
     return report

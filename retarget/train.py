@@ -372,6 +372,7 @@ class Trainer:
         self.config_path = config_path
         self.progress = progress and self.rank == 0
         self._stop = False
+        self._log_columns: tuple[str, ...] | None = None   # train_log.csv's, fixed at its first row
 
     # ---- state
     def state(self) -> dict:
@@ -420,12 +421,13 @@ class Trainer:
             return
         path = self.out / "train_log.csv"
         new = not path.exists() or path.stat().st_size == 0
-        columns = LOG_COLUMNS
-        if not new:  # a resumed run keeps its log's columns (a log from before L_rig has none)
-            with open(path, newline="") as f:
-                columns = next(csv.reader(f), None) or LOG_COLUMNS
+        if self._log_columns is None:  # a resumed run keeps its log's columns (an older log may
+            self._log_columns = LOG_COLUMNS  # have no L_rig): read once per run
+            if not new:
+                with open(path, newline="") as f:
+                    self._log_columns = tuple(next(csv.reader(f), None) or LOG_COLUMNS)
         with open(path, "a", newline="") as f:
-            w = csv.DictWriter(f, columns, extrasaction="ignore")
+            w = csv.DictWriter(f, self._log_columns, extrasaction="ignore")
             if new:
                 w.writeheader()
             w.writerow(row)
