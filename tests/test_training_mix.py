@@ -74,3 +74,24 @@ def test_shipped_mix_configs_load():
         assert cfg["data"]["sources"]["makehuman"] == 0.5
     withheld = load_config(ROOT / "configs" / "train" / "mix_no_arkit.yaml")
     assert withheld["data"]["makehuman"]["expressions"] == {"arkit": 0.0, "units": 1.0}
+
+
+def _without(cfg: dict, section: str, key: str) -> dict:
+    """A copy of ``cfg`` with ``cfg[section][key]`` removed."""
+    out = {k: dict(v) if isinstance(v, dict) else v for k, v in cfg.items()}
+    out[section].pop(key)
+    return out
+
+
+def test_stage6_study_configs_change_one_switch_of_the_bundled_design():
+    """The two studies of RESULTS' "Stage 6" differ from realistic_rig.yaml in one setting each:
+    the sources' share of MakeHuman heads, and the share of sources given their neutral."""
+    base = load_config(ROOT / "configs" / "train" / "realistic_rig.yaml")
+    mh75 = load_config(ROOT / "configs" / "train" / "realistic_rig_mh75.yaml")
+    share25 = load_config(ROOT / "configs" / "train" / "realistic_rig_share25.yaml")
+    assert base["data"]["sources"] == {"procedural": 0.5, "makehuman": 0.5}
+    assert mh75["data"]["sources"] == {"procedural": 0.25, "makehuman": 0.75}
+    assert (base["data"]["source_neutral_share"], share25["data"]["source_neutral_share"]) == (0.5, 0.25)
+    assert _without(mh75, "data", "sources") == _without(base, "data", "sources")
+    assert (_without(share25, "data", "source_neutral_share")
+            == _without(base, "data", "source_neutral_share"))
