@@ -213,9 +213,10 @@ class SourceRig:
         f = solve_triangular(self.free_chol, solve_triangular(self.free_chol, h, trans="T"))
         return f.astype(np.float32)
 
-    def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float) -> np.ndarray:
-        """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|², λ = prior ·
-        mean diag(AᵀA): frame (V,3) in the source's units, w0 (53,) the encoder's estimate. Bounded
+    def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float, sparsity: float = 0.0) -> np.ndarray:
+        """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|² + μ Σw, λ =
+        prior · mean diag(AᵀA), μ = sparsity · mean diag(AᵀA) (an L1 pull towards 0, which on
+        w ≥ 0 is linear): frame (V,3) in the source's units, w0 (53,) the encoder's estimate. Bounded
         least squares (``scipy.optimize.lsq_linear``, BVLS) on the 53×53 reduced system
         R w ≈ R⁻ᵀ (Aᵀb + λ w0), which has the same minimiser as the full (3V+53)-row problem; the
         problem is convex, so the estimate enters as the prior, not as a starting point. When the
@@ -228,6 +229,8 @@ class SourceRig:
         chol, ridge = self.factors[prior]
         b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
         h = (self.basis @ b).astype(np.float64) + ridge * w0
+        if sparsity > 0.0:
+            h -= 0.5 * sparsity * float(np.trace(self.gram)) / len(self.gram)
         rhs = solve_triangular(chol, h, trans="T")
         w = solve_triangular(chol, rhs)
         if w.min() < 0.0 or w.max() > 1.0:
@@ -245,12 +248,16 @@ class Retargeter:
 
     #: Analysis-by-synthesis (``refine``): weight of the pull towards the encoder's estimate,
     #: relative to the mean squared norm of the baked shapes — weak for the codes that transfer
-    #: decodes (the source frame explained as well as the rig can), strong for the weights that
-    #: invert returns (the baked one-hot shapes are not exactly the FACS shapes; measured in
-    #: docs/RESULTS.md); source rigs kept baked; vertices decoded per gradient step of the
-    #: free-dims refinement.
+    #: decodes (the source frame explained as well as the rig can), stronger for the weights that
+    #: invert returns, which also get an L1 pull towards 0 (``SourceRig.fit``: the baked one-hot
+    #: shapes are not exactly the FACS shapes, and shapes that barely move the surface are not
+    #: identifiable from it); the ridge of the free dims (basis decoder); source rigs kept baked;
+    #: vertices decoded per gradient step of the free-dims refinement (MLP decoder). Tuned on a
+    #: tuning set apart from the eval's test set (docs/RESULTS.md, "Stage 7").
     REFINE_PRIOR = 1e-3
-    REFINE_PRIOR_INVERT = 1.0
+    REFINE_PRIOR_INVERT = 0.1
+    REFINE_SPARSITY_INVERT = 0.02
+    REFINE_FREE_PRIOR = 1e-3
     SOURCE_RIGS_KEPT = 8
     REFINE_ROWS = 2000
 
@@ -398,9 +405,11 @@ class Retargeter:
         """Inverse rigging: frame(s) -> FACS weights (53,) or (T,53) in ICT order, clipped to [0,1].
         ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames.
         ``refine``: analysis-by-synthesis on the source's own baked rig (needs ``source_neutral``;
-        see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT``."""
+        see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT`` and
+        towards 0 with ``REFINE_SPARSITY_INVERT``."""
         z = self.expression_codes(frames, source_neutral, smooth, fps, progress, refine,
-                                  refine_prior=self.REFINE_PRIOR_INVERT)
+                                  refine_prior=self.REFINE_PRIOR_INVERT,
+                                  refine_sparsity=self.REFINE_SPARSITY_INVERT)
         return np.clip(z[..., :N_FACS], 0.0, 1.0).astype(np.float32)
 
     # --------------------------------------------------------------------------- analysis by synthesis
@@ -416,11 +425,11 @@ class Retargeter:
             free = (basis_shapes(target, slice(N_FACS, None))   # the basis decoder: the free
                     if target.codes.basis is not None else None)  # dims' shapes too
             self._source_rigs[key] = SourceRig.make(target, self.bake(target), free,
-                                                    self.REFINE_PRIOR)
+                                                    self.REFINE_FREE_PRIOR)
         return self._source_rigs[key]
 
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
-               prior: float | None = None) -> np.ndarray:
+               prior: float | None = None, sparsity: float = 0.0) -> np.ndarray:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
@@ -429,7 +438,8 @@ class Retargeter:
         by ``refine_steps`` Adam steps through the decoder on the source neutral (``REFINE_ROWS``
         fixed vertices; 0 = the code is [w, 0]). frames: a Mesh or a list sharing the neutral's
         topology; z_ge (128,) or (T,128) -> the same shape, float32. prior: the weights' pull
-        towards the encoder (default ``REFINE_PRIOR``)."""
+        towards the encoder (default ``REFINE_PRIOR``); sparsity: their L1 pull towards 0
+        (``SourceRig.fit``; default none)."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
                                 "--source-neutral on the command line)")
@@ -439,7 +449,7 @@ class Retargeter:
         out = np.zeros_like(z)
         for i, frame in enumerate(frames):
             out[i, :N_FACS] = rig.fit(frame.vertices, np.clip(z[i, :N_FACS], 0.0, 1.0),
-                                      self.REFINE_PRIOR if prior is None else prior)
+                                      self.REFINE_PRIOR if prior is None else prior, sparsity)
             if rig.free_basis is not None:
                 out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             elif self.refine_steps > 0:
@@ -497,13 +507,15 @@ class Retargeter:
     def expression_codes(self, source, source_neutral: Mesh | None = None,
                          smooth: str | None = None, fps: float = 30.0,
                          progress: bool = False, refine: bool = False,
-                         refine_prior: float | None = None) -> np.ndarray:
+                         refine_prior: float | None = None,
+                         refine_sparsity: float = 0.0) -> np.ndarray:
         """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), refined by
-        analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior``), temporally
+        analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior`` and
+        ``refine_sparsity``), temporally
         filtered when ``smooth`` is given (see ``invert``)."""
         z = self.encode(source, source_neutral, progress)
         if refine:
-            z = self.refine(source, source_neutral, z, refine_prior)
+            z = self.refine(source, source_neutral, z, refine_prior, refine_sparsity)
         if smooth and z.ndim == 2:
             z = smooth_codes(z, smooth, fps)
         return z

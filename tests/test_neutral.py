@@ -144,6 +144,29 @@ def test_bounded_least_squares_recovers_the_weights_of_an_exactly_linear_rig(rig
     assert far.min() >= 0 and far.max() <= 1 and far[5:10].min() == pytest.approx(1.0)
 
 
+def test_sparse_fit_is_the_minimiser_of_the_l1_objective(rig):
+    """SourceRig.fit with sparsity μ: the weights satisfy the optimality conditions of
+    |A w − b|² + λ|w − w0|² + μ Σw on [0, 1] (gradient 0 inside, ≥ 0 at 0, ≤ 0 at 1), and the
+    pull towards 0 lowers the sum of the weights."""
+    w = np.random.default_rng(2).random(53).astype(np.float32) * 0.6
+    w[:20] = 0.0
+    src = SourceRig.make(None, BakedRig(rig.neutral, rig.deltas))
+    frame = rig.evaluate(w) + 0.002 * np.random.default_rng(3).standard_normal(rig.neutral.shape)
+    w0 = np.full(53, 0.2, np.float32)
+    scale = float(np.trace(src.gram)) / 53
+    plain = src.fit(frame, w0, prior=0.1)
+    for mu in (0.02, 0.2):
+        fit = src.fit(frame, w0, prior=0.1, sparsity=mu).astype(np.float64)
+        b = (frame - rig.neutral).reshape(-1).astype(np.float64)
+        grad = (2 * (src.gram @ fit - src.basis.astype(np.float64) @ b)
+                + 2 * 0.1 * scale * (fit - w0) + mu * scale)
+        tol = 1e-3 * scale
+        inside = (fit > 1e-6) & (fit < 1 - 1e-6)
+        assert np.abs(grad[inside]).max() < tol
+        assert grad[fit <= 1e-6].min(initial=0.0) > -tol and grad[fit >= 1 - 1e-6].max(initial=0.0) < tol
+        assert fit.sum() < plain.sum()
+
+
 def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
     neutral = Mesh(rig.neutral, rig.faces)
     baked = r.source_rig(neutral).baked
@@ -157,10 +180,11 @@ def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
         fitted = np.square(baked.evaluate(wi) - f.vertices).sum()
         scale = np.square(f.vertices - baked.neutral).sum()
         assert fitted <= np.square(baked.evaluate(true) - f.vertices).sum() + 1e-2 * scale
-    # invert pulls the weights towards the encoder's with its own, stronger prior
+    # invert pulls the weights towards the encoder's with its own, stronger prior, and towards 0
     inverted = r.invert(frames, source_neutral=neutral, refine=True)
     np.testing.assert_array_equal(inverted, r.expression_codes(
-        frames, source_neutral=neutral, refine=True, refine_prior=r.REFINE_PRIOR_INVERT)[:, :53])
+        frames, source_neutral=neutral, refine=True, refine_prior=r.REFINE_PRIOR_INVERT,
+        refine_sparsity=r.REFINE_SPARSITY_INVERT)[:, :53])
     encoder = np.clip(r.invert(frames, source_neutral=neutral), 0, 1)
     assert np.abs(inverted - encoder).mean() < np.abs(w - encoder).mean()
     with pytest.raises(Exception, match="refine needs the source's neutral"):
