@@ -255,6 +255,7 @@ class Retargeter:
     #: vertices decoded per gradient step of the free-dims refinement (MLP decoder). Tuned on a
     #: tuning set apart from the eval's test set (docs/RESULTS.md, "Stage 7").
     REFINE_PRIOR = 1e-3
+    REFINE_SPARSITY = 0.0
     REFINE_PRIOR_INVERT = 0.1
     REFINE_SPARSITY_INVERT = 0.02
     REFINE_FREE_PRIOR = 1e-3
@@ -429,7 +430,7 @@ class Retargeter:
         return self._source_rigs[key]
 
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
-               prior: float | None = None, sparsity: float = 0.0) -> np.ndarray:
+               prior: float | None = None, sparsity: float | None = None) -> np.ndarray:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
@@ -439,7 +440,7 @@ class Retargeter:
         fixed vertices; 0 = the code is [w, 0]). frames: a Mesh or a list sharing the neutral's
         topology; z_ge (128,) or (T,128) -> the same shape, float32. prior: the weights' pull
         towards the encoder (default ``REFINE_PRIOR``); sparsity: their L1 pull towards 0
-        (``SourceRig.fit``; default none)."""
+        (``SourceRig.fit``; default ``REFINE_SPARSITY``)."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
                                 "--source-neutral on the command line)")
@@ -449,7 +450,8 @@ class Retargeter:
         out = np.zeros_like(z)
         for i, frame in enumerate(frames):
             out[i, :N_FACS] = rig.fit(frame.vertices, np.clip(z[i, :N_FACS], 0.0, 1.0),
-                                      self.REFINE_PRIOR if prior is None else prior, sparsity)
+                                      self.REFINE_PRIOR if prior is None else prior,
+                                      self.REFINE_SPARSITY if sparsity is None else sparsity)
             if rig.free_basis is not None:
                 out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             elif self.refine_steps > 0:
@@ -508,7 +510,7 @@ class Retargeter:
                          smooth: str | None = None, fps: float = 30.0,
                          progress: bool = False, refine: bool = False,
                          refine_prior: float | None = None,
-                         refine_sparsity: float = 0.0) -> np.ndarray:
+                         refine_sparsity: float | None = None) -> np.ndarray:
         """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), refined by
         analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior`` and
         ``refine_sparsity``), temporally
