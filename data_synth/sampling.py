@@ -6,15 +6,20 @@ import numpy as np
 
 from .facs import N_FACS
 
-MODES = ("uniform", "onehot", "sparse", "mixed")
+MODES = ("uniform", "onehot", "sparse", "neutral", "subtle", "mixed", "calm")
 MIXED_SHARES = {"uniform": 0.3, "onehot": 0.2, "sparse": 0.5}
+#: "calm": "mixed" with a share of neutral frames (every weight 0) and of subtle ones (1-5 active
+#: shapes at weights ~U(0, 0.3)), the small motions around the neutral that most captured frames are
+CALM_SHARES = {"uniform": 0.2, "onehot": 0.15, "sparse": 0.4, "neutral": 0.1, "subtle": 0.15}
 
 
 def sample_weights(rng: np.random.Generator, n: int, mode: str = "mixed") -> np.ndarray:
     """(n, 53) float64 weights in [0, 1].
 
     uniform: every weight ~U(0,1); onehot: one shape at 1; sparse: 1-5 active shapes with weights
-    ~U(0.2, 1); mixed: each row drawn from the three modes with MIXED_SHARES.
+    ~U(0.2, 1); neutral: every weight 0; subtle: 1-5 active shapes with weights ~U(0, 0.3); mixed:
+    each row drawn from the first three modes with MIXED_SHARES; calm: from all five with
+    CALM_SHARES.
     """
     if mode not in MODES:
         raise ValueError(f"sample_weights: mode must be one of {MODES}, got {mode!r}")
@@ -24,12 +29,16 @@ def sample_weights(rng: np.random.Generator, n: int, mode: str = "mixed") -> np.
     if mode == "onehot":
         out[np.arange(n), rng.integers(0, N_FACS, n)] = 1.0
         return out
-    if mode == "sparse":
+    if mode in ("sparse", "subtle"):
+        lo, hi = (0.2, 1.0) if mode == "sparse" else (0.0, 0.3)
         for row, k in zip(out, rng.integers(1, 6, n)):
-            row[rng.choice(N_FACS, k, replace=False)] = rng.uniform(0.2, 1.0, k)
+            row[rng.choice(N_FACS, k, replace=False)] = rng.uniform(lo, hi, k)
         return out
-    kinds = rng.choice(len(MIXED_SHARES), n, p=list(MIXED_SHARES.values()))
-    for i, name in enumerate(MIXED_SHARES):
+    if mode == "neutral":
+        return out
+    shares = MIXED_SHARES if mode == "mixed" else CALM_SHARES
+    kinds = rng.choice(len(shares), n, p=list(shares.values()))
+    for i, name in enumerate(shares):
         rows = kinds == i
         out[rows] = sample_weights(rng, int(rows.sum()), name)
     return out

@@ -105,7 +105,7 @@ def source_shares(data_cfg: dict) -> np.ndarray:
 
 class MakeHumanRigs:
     """Realistic rigs of the ``data.makehuman`` section: an identity of ``split`` (its
-    ``stylised_share``), its shapes from ``expressions`` ({"arkit": p, "units": p}, drawn per
+    ``stylised_share``), its shapes from ``expressions`` ({"arkit": p, "units": p, "units_full": p}, drawn per
     identity) with a per-rig ``style`` (or as authored), on the listed ``tessellations``
     (``data_synth.makehuman.head_tessellation`` arguments)."""
 
@@ -115,8 +115,8 @@ class MakeHumanRigs:
         kinds = sorted(mh_cfg["expressions"])
         self.expr_kinds = kinds
         p = np.array([float(mh_cfg["expressions"][k]) for k in kinds])
-        if (p < 0).any() or p.sum() <= 0 or not set(kinds) <= {"arkit", "units"}:
-            raise RetargetError(f"data.makehuman.expressions must give shares of arkit, units "
+        if (p < 0).any() or p.sum() <= 0 or not set(kinds) <= {"arkit", "units", "units_full"}:
+            raise RetargetError(f"data.makehuman.expressions must give shares of arkit, units, units_full "
                                 f"(got {mh_cfg['expressions']})")
         self.expr_p = p / p.sum()
 

@@ -39,7 +39,7 @@ def test_levels_are_nested_and_sided(full_head):
         segment_labels(full_head.uv, 12)
 
 
-@pytest.mark.parametrize("mode", ["uniform", "onehot", "sparse", "mixed"])
+@pytest.mark.parametrize("mode", ["uniform", "onehot", "sparse", "neutral", "subtle", "mixed", "calm"])
 def test_sample_weights(mode):
     w = sample_weights(np.random.default_rng(0), 400, mode)
     assert w.shape == (400, 53) and w.min() >= 0 and w.max() <= 1
@@ -48,8 +48,16 @@ def test_sample_weights(mode):
         assert (active == 1).all() and np.allclose(w.max(1), 1)
     if mode == "sparse":
         assert active.min() >= 1 and active.max() <= 5
+    if mode == "neutral":
+        assert (active == 0).all()
+    if mode == "subtle":
+        assert active.min() >= 1 and active.max() <= 5 and w.max() <= 0.3
     if mode == "mixed":
         assert (active == 1).any() and (active == 53).any() and ((active > 1) & (active <= 5)).any()
+        assert active.min() >= 1
+    if mode == "calm":                  # about 10 % neutral and 15 % subtle frames besides "mixed"'s
+        assert 0.05 < (active == 0).mean() < 0.15 and (active == 53).any()
+        assert 0.1 < ((active > 0) & (w.max(1) <= 0.3)).mean() < 0.25
     assert np.array_equal(w, sample_weights(np.random.default_rng(0), 400, mode))
 
 

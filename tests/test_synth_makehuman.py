@@ -6,7 +6,8 @@ from data_synth import FACS_NAMES
 from data_synth.makehuman import (CROPS, base_head_rig, build_head_rig, head_neutral,
                                   head_tessellation, sample_head_identity)
 from data_synth.makehuman import assets
-from data_synth.makehuman.expressions import base_arkit_ict, identity_expressions
+from data_synth.makehuman.expressions import (SURROGATE_NAMES, base_arkit_ict, base_surrogates_ict,
+                                              identity_expressions, jaw_hinge)
 from data_synth.makehuman.transfer import deformation_transfer
 
 
@@ -54,6 +55,43 @@ def test_units_source_lacks_the_shapes_without_a_unit():
     assert 20 <= present.sum() < 53
     assert not present[FACS_NAMES.index("cheekPuff_L")] and present[FACS_NAMES.index("jawOpen")]
     assert np.abs(deltas[~present]).max() == 0.0
+
+
+def test_units_full_source_completes_the_units_with_surrogates():
+    ident = sample_head_identity(2, "train")
+    neutral, race = head_neutral(ident), ident.macros["race"]
+    units, has_unit = identity_expressions(neutral, race, "units")
+    full, present = identity_expressions(neutral, race, "units_full")
+    assert present.all() and len(SURROGATE_NAMES) == 53 - has_unit.sum()
+    assert np.array_equal(full[has_unit], units[has_unit])      # the units themselves unchanged
+    assert all(np.abs(full[FACS_NAMES.index(n)]).max() > 0.1 for n in SURROGATE_NAMES)  # cm
+
+
+def test_surrogates_move_the_side_and_direction_their_name_says():
+    deltas, present = base_surrogates_ict(np.full(3, 1 / 3, np.float32))
+    x = assets.heads()["full_neutral"][:, 0]
+    assert present.sum() == len(SURROGATE_NAMES)
+
+    def mean_x(name):                       # magnitude-weighted x of where the shape acts, cm
+        m = np.linalg.norm(deltas[FACS_NAMES.index(name)], axis=1)
+        return (m * x).sum() / m.sum()
+
+    for name in ("cheekPuff", "cheekSquint", "mouthDimple", "eyeLookUp", "eyeLookIn"):
+        assert mean_x(name + "_L") > 1.0 and mean_x(name + "_R") < -1.0
+    dx = {n: deltas[FACS_NAMES.index(n)][:, 0].sum() for n in
+          ("jawLeft", "jawRight", "mouthLeft", "mouthRight", "eyeLookOut_L", "eyeLookIn_L")}
+    assert dx["jawLeft"] > 0 > dx["jawRight"] and dx["mouthLeft"] > 0 > dx["mouthRight"]
+    assert dx["eyeLookOut_L"] > 0 > dx["eyeLookIn_L"]           # the left eye looks out to +x
+    assert deltas[FACS_NAMES.index("jawForward")][:, 2].min() >= 0.0
+
+
+def test_jaw_hinge_recovers_a_known_rotation():
+    rng = np.random.default_rng(0)
+    p = rng.uniform([-5, 60, 5], [5, 70, 16], size=(300, 3))
+    a, yh, zh = 0.2, 70.0, 4.0
+    d = np.stack([np.zeros(300), -a * (p[:, 2] - zh), a * (p[:, 1] - yh)], 1)
+    got = jaw_hinge(p, d, np.ones(300))
+    assert np.allclose(got, (a, yh, zh), atol=1e-6)
 
 
 @pytest.mark.parametrize("kind", ["decimated", "jittered", "subdivided", "flipped"])

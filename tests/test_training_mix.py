@@ -4,6 +4,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from data_synth.facs import FACS_INDEX
+from data_synth.makehuman.expressions import SURROGATE_NAMES
 from retarget.errors import RetargetError
 from retarget.train import Trainer, load_config
 from retarget.training_data import TargetPool, validation_entries
@@ -51,6 +53,26 @@ def test_units_rigs_zero_the_shapes_they_lack():
     assert all(np.all(w[:, ~e.present] == 0) for e, w in val)
 
 
+def test_units_full_rigs_have_every_shape_and_a_zero_share_changes_no_draw():
+    from retarget.train import model_cfg
+    cfg = mix_cfg(1.0, {"arkit": 0.0, "units": 0.0, "units_full": 1.0})
+    group = TargetPool(cfg["data"], model_cfg(cfg), seed=0).sample(0)
+    assert group.target.present.all()
+    surrogate = [FACS_INDEX[n] for n in SURROGATE_NAMES]
+    assert any(np.any(s.weights[surrogate] > 0) for g in pool_groups(cfg, 2) for s in g.sources)
+    # a source given share 0 leaves the other sources' draws as they were without it
+    a, b = mix_cfg(1.0, {"arkit": 0.6, "units": 0.4}), mix_cfg(1.0, {"arkit": 0.6, "units": 0.4})
+    b["data"]["makehuman"]["expressions"]["units_full"] = 0.0
+    ga, gb = pool_groups(a, 3), pool_groups(b, 3)
+    assert all(np.array_equal(x.gt_dv, y.gt_dv) for x, y in zip(ga, gb))
+
+
+def pool_groups(cfg: dict, n: int) -> list:
+    from retarget.train import model_cfg
+    pool = TargetPool(cfg["data"], model_cfg(cfg), seed=0)
+    return [pool.sample(i) for i in range(n)]
+
+
 def test_bad_source_shares_are_refused():
     cfg = mix_cfg(0.5)
     cfg["data"]["sources"] = {"procedural": 0.0, "scans": 1.0}
@@ -73,7 +95,9 @@ def test_shipped_mix_configs_load():
         cfg = load_config(ROOT / "configs" / "train" / f"{name}.yaml")
         assert cfg["data"]["sources"]["makehuman"] == 0.5
     withheld = load_config(ROOT / "configs" / "train" / "mix_no_arkit.yaml")
-    assert withheld["data"]["makehuman"]["expressions"] == {"arkit": 0.0, "units": 1.0}
+    assert withheld["data"]["makehuman"]["expressions"] == {"arkit": 0.0, "units": 1.0, "units_full": 0.0}
+    full = load_config(ROOT / "configs" / "train" / "realistic_units_full.yaml")
+    assert full["data"]["makehuman"]["expressions"] == {"arkit": 0.0, "units": 0.0, "units_full": 1.0}
 
 
 def _without(cfg: dict, section: str, key: str) -> dict:

@@ -8,7 +8,11 @@ deformation transfer (``transfer.deformation_transfer``, one factorisation per i
 - ``"units"``: MakeHuman's CC0 expression units mapped to their closest ICT shapes (the table of
   data/README.md, "Expression units and their closest FACS / ICT / ARKit shapes"): 29 of the 53;
   the others are absent (``present`` False). This is the ARKit-withheld source of the
-  generalisation study.
+  generalisation study;
+- ``"units_full"``: ``"units"`` completed to all 53 by surrogates for the other 24
+  (``base_surrogates_ict``), made from MakeHuman's CC0 face modifiers, the expression units and
+  rigid motions of the jaw and eyelid regions those units move, following each shape's FACS
+  description (never fitted to the artist's ARKit shapes, which the study holds out).
 
 ``style`` varies each rig so that the network learns what a FACS shape means rather than one
 artist's rig: per-shape gain (left/right partners nearly equal), a smooth random spatial warp of
@@ -43,6 +47,10 @@ UNIT_TO_ICT = {
     "nose-left-elevation": ("noseSneer_L",), "nose-right-elevation": ("noseSneer_R",),
 }
 MIDLINE_CM = 1.0   # half width of the blend across the mid-plane x = 0 when a shape is split
+LIP_BAND_CM = 0.3  # half width of the blend between the upper and the lower lip
+JAW_YAW_RAD = 0.1  # jawLeft / jawRight: yaw of the jaw region about the fitted hinge
+JAW_FORWARD_CM = 0.6
+LID_SHIFT_CM = 0.2  # eyeLookIn / eyeLookOut: sideways shift of the eyelid region
 
 
 def _to_ict(named: dict[str, tuple[str, ...]], deltas: np.ndarray, x: np.ndarray):
@@ -73,6 +81,104 @@ def base_units_ict(race: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _to_ict(UNIT_TO_ICT, mixed, z["full_neutral"][:, 0])
 
 
+def _unit(name: str, race: np.ndarray) -> np.ndarray:
+    """One MakeHuman expression unit on the base head, mixed by ``race`` (3,): (4326,3) cm."""
+    z = assets.heads()
+    i = [str(n) for n in z["expr_unit_names"]].index(name)
+    q = z["target_deltas_q"][z["expr_unit_targets"][i]].astype(np.float32)   # (3,V,3)
+    return np.tensordot(np.asarray(race, np.float32), q, axes=1) * np.float32(z["deltas_scale_cm"])
+
+
+def _modifier_target(name: str) -> np.ndarray:
+    """One MakeHuman face-modifier target on the base head: (4326,3) cm."""
+    z = assets.heads()
+    i = [str(n) for n in z["target_names"]].index(name)
+    return z["target_deltas_q"][i].astype(np.float32) * np.float32(z["deltas_scale_cm"])
+
+
+def region_weight(delta: np.ndarray, quantile: float = 0.9) -> np.ndarray:
+    """(V,) in [0, 1]: a delta's (V,3) magnitude over its ``quantile`` among the moved vertices
+    (> 0.05 cm), clipped: the region a unit moves, 1 where it moves most."""
+    m = np.linalg.norm(delta, axis=1)
+    return np.clip(m / np.quantile(m[m > 0.05], quantile), 0.0, 1.0).astype(np.float32)
+
+
+def jaw_hinge(points: np.ndarray, delta: np.ndarray, weight: np.ndarray) -> tuple[float, float, float]:
+    """(angle rad, y, z cm) of the rotation about an x-parallel axis through (y, z) that best
+    explains a jaw-opening delta (V,3) on points (V,3), least squares weighted by weight (V,):
+    to first order d_y = -a (z - z_h), d_z = a (y - y_h), linear in (a, a z_h, a y_h)."""
+    y, zc = points[:, 1].astype(np.float64), points[:, 2].astype(np.float64)
+    n = len(y)
+    A = np.zeros((2 * n, 3))
+    A[:n, 0], A[:n, 1] = -zc, 1.0
+    A[n:, 0], A[n:, 2] = y, -1.0
+    b = np.concatenate([delta[:, 1], delta[:, 2]]).astype(np.float64)
+    sw = np.sqrt(np.concatenate([weight, weight]).astype(np.float64))
+    a, az, ay = np.linalg.lstsq(A * sw[:, None], b * sw, rcond=None)[0]
+    return float(a), float(ay / a), float(az / a)
+
+
+SURROGATE_NAMES = tuple(n for n in FACS_INDEX
+                        if n not in {s for v in UNIT_TO_ICT.values() for s in v})
+
+
+def base_surrogates_ict(race: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Surrogates on the base head for the 24 ICT shapes no expression unit maps to
+    (``SURROGATE_NAMES``), in ICT order: ((53,4326,3) float32 cm, present (53,) bool).
+
+    - cheekPuff / cheekSquint: the cheek-volume-incr / cheek-trans-up modifiers of each side;
+    - mouthLeft / Right: mouth-trans-out / -in; mouthDimple: mouth-dimples-in (twice) plus 0.3 of
+      the mouth-retraction unit, split by side; mouthShrugUpper: upperlip-middle-up;
+      mouthShrugLower: lowerlip-middle-down plus 0.3 of chin-height-decr (the chin raiser);
+      mouthRoll*: minus that lip's part of the mouth-eversion unit plus twice its lip-volume-decr;
+      mouthClose: minus the mouth-parling unit plus half of lowerlip-middle-down;
+    - jawForward / Left / Right: the region the mouth-open unit moves, translated forward by
+      JAW_FORWARD_CM or turned by ±JAW_YAW_RAD about a vertical axis through the hinge fitted to
+      that unit (``jaw_hinge``);
+    - eyeLook*: the lids the eye-closure unit moves: Up 0.5 of eye-opened-up, Down 0.4 of the
+      closure, In / Out shifted sideways by LID_SHIFT_CM (towards / away from the nose)."""
+    z = assets.heads()
+    p = z["full_neutral"].astype(np.float32)
+    x, y = p[:, 0], p[:, 1]
+    left = left_weight(x, 0.0, MIDLINE_CM)[:, None]
+    mouth_y = float((p[:, 1] * region_weight(_modifier_target("mouth/mouth-trans-up"))).sum()
+                    / region_weight(_modifier_target("mouth/mouth-trans-up")).sum())
+    upper_lip = left_weight(y, mouth_y, LIP_BAND_CM)[:, None]   # 1 above the mouth line
+    t = _modifier_target
+    s: dict[str, np.ndarray] = {}
+    for side, tag, w in (("_L", "l", left), ("_R", "r", 1.0 - left)):
+        s["cheekPuff" + side] = t(f"cheek/{tag}-cheek-volume-incr")
+        s["cheekSquint" + side] = t(f"cheek/{tag}-cheek-trans-up")
+        s["mouthDimple" + side] = w * (2.0 * t("mouth/mouth-dimples-in") + 0.3 * _unit("mouth-retraction", race))
+    s["mouthLeft"], s["mouthRight"] = t("mouth/mouth-trans-out"), t("mouth/mouth-trans-in")
+    s["mouthShrugUpper"] = t("mouth/mouth-upperlip-middle-up")
+    s["mouthShrugLower"] = t("mouth/mouth-lowerlip-middle-down") + 0.3 * t("chin/chin-height-decr")
+    eversion = _unit("mouth-eversion", race)
+    s["mouthRollUpper"] = -upper_lip * eversion + 2.0 * t("mouth/mouth-upperlip-volume-decr")
+    s["mouthRollLower"] = -(1.0 - upper_lip) * eversion + 2.0 * t("mouth/mouth-lowerlip-volume-decr")
+    s["mouthClose"] = -_unit("mouth-parling", race) + 0.5 * t("mouth/mouth-lowerlip-middle-down")
+    jaw_open = _unit("mouth-open", race)
+    jaw = region_weight(jaw_open)
+    _, _, hinge_z = jaw_hinge(p, jaw_open, jaw ** 2)
+    zero = np.zeros_like(x)
+    s["jawForward"] = JAW_FORWARD_CM * jaw[:, None] * np.array([0.0, 0.0, 1.0], np.float32)
+    yaw = np.stack([JAW_YAW_RAD * (p[:, 2] - hinge_z), zero, -JAW_YAW_RAD * x], 1) * jaw[:, None]
+    s["jawLeft"], s["jawRight"] = yaw, yaw * np.array([-1.0, 1.0, -1.0], np.float32)
+    for side, tag, out_x in (("_L", "left", 1.0), ("_R", "right", -1.0)):
+        closure = _unit(f"eye-{tag}-closure", race)
+        lids = region_weight(closure)[:, None]
+        s["eyeLookUp" + side] = 0.5 * _unit(f"eye-{tag}-opened-up", race)
+        s["eyeLookDown" + side] = 0.4 * closure
+        s["eyeLookOut" + side] = lids * np.array([out_x * LID_SHIFT_CM, 0.0, 0.0], np.float32)
+        s["eyeLookIn" + side] = -s["eyeLookOut" + side]
+    assert set(s) == set(SURROGATE_NAMES)
+    deltas = np.zeros((N_FACS, len(p), 3), np.float32)
+    present = np.zeros(N_FACS, bool)
+    for name, d in s.items():
+        deltas[FACS_INDEX[name]], present[FACS_INDEX[name]] = d, True
+    return deltas, present
+
+
 def smooth_field(rng: np.random.Generator, points: np.ndarray, n_bumps: int = 4,
                  radius_cm: tuple = (3.0, 8.0)) -> np.ndarray:
     """(V,) a smooth random field in about [-1, 1]: a sum of Gaussian bumps at random points."""
@@ -101,7 +207,7 @@ def identity_expressions(neutral: np.ndarray, race: np.ndarray, source: str = "a
                          style_seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The 53 shapes on an identity's head neutral (4326,3) cm: ((53,4326,3) float32, present).
 
-    source "arkit" or "units" (module docstring); style_seed None = the source as authored, else
+    source "arkit", "units" or "units_full" (module docstring); style_seed None = the source as authored, else
     the rig's random style (``style_shapes``, and for "arkit" a blend of share U(0, 0.5) towards
     the mapped unit on the shapes that have one, with probability 1/2)."""
     base = assets.heads()["full_neutral"]
@@ -116,8 +222,12 @@ def identity_expressions(neutral: np.ndarray, race: np.ndarray, source: str = "a
             shapes[has_unit] = (1 - alpha) * shapes[has_unit] + alpha * units[has_unit]
     elif source == "units":
         shapes, present = base_units_ict(race)
+    elif source == "units_full":
+        shapes, present = base_units_ict(race)
+        extra, has_extra = base_surrogates_ict(race)
+        shapes, present = np.where(has_extra[:, None, None], extra, shapes), present | has_extra
     else:
-        raise ValueError(f"expression source must be 'arkit' or 'units', got {source!r}")
+        raise ValueError(f"expression source must be 'arkit', 'units' or 'units_full', got {source!r}")
     deltas = np.zeros_like(shapes)
     deltas[present] = deformation_transfer(base, shapes[present], neutral, faces)
     if rng is not None:
