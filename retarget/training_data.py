@@ -105,7 +105,7 @@ def source_shares(data_cfg: dict) -> np.ndarray:
 
 class MakeHumanRigs:
     """Realistic rigs of the ``data.makehuman`` section: an identity of ``split`` (its
-    ``stylised_share``), its shapes from ``expressions`` ({"arkit": p, "units": p, "units_full": p}, drawn per
+    ``stylised_share``, ``partial_macro_share``), its shapes from ``expressions`` ({"arkit": p, "units": p, "units_full": p}, drawn per
     identity) with a per-rig ``style`` (or as authored), on the listed ``tessellations``
     (``data_synth.makehuman.head_tessellation`` arguments)."""
 
@@ -126,7 +126,8 @@ class MakeHumanRigs:
 
         rng = np.random.default_rng([seed, 31])
         kind = self.expr_kinds[int(rng.choice(len(self.expr_kinds), p=self.expr_p))]
-        ident = sample_head_identity(seed, self.split, float(self.cfg["stylised_share"]))
+        ident = sample_head_identity(seed, self.split, float(self.cfg["stylised_share"]),
+                                     float(self.cfg["partial_macro_share"]))
         return base_head_rig(ident, kind, seed if self.cfg["style"] else None)
 
     def rig(self, base, spec_index: int, tess_seed: int, n_segments: int):

@@ -23,6 +23,18 @@ def test_identities_deterministic_disjoint_and_human():
         assert np.isfinite(head).all()
 
 
+def test_partial_macro_heads_lie_between_the_base_mesh_and_the_full_head():
+    full = sample_head_identity(3, "train")
+    assert np.array_equal(sample_head_identity(3, "train", partial_macro_share=0.0).weights, full.weights)
+    part = sample_head_identity(3, "train", partial_macro_share=1.0)
+    assert np.array_equal(part.weights, sample_head_identity(3, "train", partial_macro_share=1.0).weights)
+    macro = assets.heads()["macro_target"]
+    other = np.setdiff1d(np.arange(len(full.weights)), macro)
+    assert np.array_equal(part.weights[other], full.weights[other])     # modifiers untouched
+    s = part.weights[macro].sum() / full.weights[macro].sum()
+    assert 0.0 <= s < 1.0 and np.allclose(part.weights[macro], s * full.weights[macro], rtol=1e-5)
+
+
 def test_deformation_transfer_reproduces_on_its_own_neutral():
     z = assets.arkit()
     deltas = z["full_deltas"][:4]

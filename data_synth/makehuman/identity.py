@@ -82,9 +82,15 @@ def _modifier_spread(z: dict) -> np.ndarray:
     return m
 
 
-def sample_head_identity(seed: int, split: str = "train", stylised_share: float = 0.15
-                         ) -> HeadIdentity:
-    """A random head of ``split`` (its own seed range). Deterministic in (seed, split)."""
+def sample_head_identity(seed: int, split: str = "train", stylised_share: float = 0.15,
+                         partial_macro_share: float = 0.0) -> HeadIdentity:
+    """A random head of ``split`` (its own seed range). Deterministic in (seed, split).
+
+    partial_macro_share: the probability that the head's macro targets (ethnicity, gender, age,
+    muscle, weight, height, proportions) are applied at a scale s ~ U(0, 1) instead of fully, so
+    that heads between MakeHuman's raw base mesh (s = 0, which no full macro mix gives) and a
+    finished human are drawn too. Drawn from a stream of its own: the heads of share 0 are those
+    of earlier versions."""
     if split not in SPLIT_OFFSET:
         raise ValueError(f"split must be one of {tuple(SPLIT_OFFSET)}, got {split!r}")
     rng = np.random.default_rng([SPLIT_OFFSET[split] + int(seed), 4242])
@@ -140,6 +146,12 @@ def sample_head_identity(seed: int, split: str = "train", stylised_share: float 
             weights[z["modifier_pos"][m]] += v
         elif v < 0 and z["modifier_neg"][m] >= 0:
             weights[z["modifier_neg"][m]] += -v
+    if partial_macro_share > 0:
+        part = np.random.default_rng([SPLIT_OFFSET[split] + int(seed), 4243])
+        if part.random() < partial_macro_share:
+            scale = np.float32(part.uniform(0.0, 1.0))
+            weights[z["macro_target"]] *= scale
+            extra = extra * scale
     return HeadIdentity(weights, extra, macros, int(seed), split, stylised)
 
 
