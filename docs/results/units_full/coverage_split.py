@@ -1,7 +1,7 @@
 """Split the real-rig per-shape table of `retarget eval` into jawOpen, the other shapes a
 MakeHuman expression unit maps to (data_synth.makehuman.expressions.UNIT_TO_ICT) and the shapes
 without a unit: the errors of the artist's one-hot ARKit shapes, summed over each group, as a
-ratio to doing nothing on the same shapes (jawOpen alone is 38 % of the do-nothing error).
+ratio to doing nothing on the same shapes (jawOpen alone is 39 % of the do-nothing error).
 
     python docs/results/units_full/coverage_split.py EVAL.json [EVAL.json ...] > OUT.md
 """
