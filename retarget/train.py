@@ -51,7 +51,8 @@ DEFAULTS = {
         "sources": {"procedural": 1.0, "makehuman": 0.0},
         "makehuman": {
             "tessellations": [{"n_vertices": 2500, "kind": "decimated", "crop": "head_neck"}],
-            "expressions": {"arkit": 1.0, "units": 0.0, "units_full": 0.0}, "style": True, "stylised_share": 0.15, "partial_macro_share": 0.0,
+            "expressions": {"arkit": 1.0, "units": 0.0, "units_full": 0.0}, "style": True,
+            "stylised_share": 0.15, "partial_macro_share": 0.0,
         },
     },
     "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,

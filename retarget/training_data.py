@@ -105,9 +105,9 @@ def source_shares(data_cfg: dict) -> np.ndarray:
 
 class MakeHumanRigs:
     """Realistic rigs of the ``data.makehuman`` section: an identity of ``split`` (its
-    ``stylised_share``, ``partial_macro_share``), its shapes from ``expressions`` ({"arkit": p, "units": p, "units_full": p}, drawn per
-    identity) with a per-rig ``style`` (or as authored), on the listed ``tessellations``
-    (``data_synth.makehuman.head_tessellation`` arguments)."""
+    ``stylised_share``, ``partial_macro_share``), its shapes from ``expressions`` ({"arkit": p,
+    "units": p, "units_full": p}, drawn per identity) with a per-rig ``style`` (or as authored),
+    on the listed ``tessellations`` (``data_synth.makehuman.head_tessellation`` arguments)."""
 
     def __init__(self, mh_cfg: dict, split: str):
         self.cfg, self.split = mh_cfg, split
@@ -116,7 +116,8 @@ class MakeHumanRigs:
         self.expr_kinds = kinds
         p = np.array([float(mh_cfg["expressions"][k]) for k in kinds])
         if (p < 0).any() or p.sum() <= 0 or not set(kinds) <= {"arkit", "units", "units_full"}:
-            raise RetargetError(f"data.makehuman.expressions must give shares of arkit, units, units_full "
+            raise RetargetError(f"data.makehuman.expressions must give shares of arkit, units, "
+                                f"units_full "
                                 f"(got {mh_cfg['expressions']})")
         self.expr_p = p / p.sum()
 

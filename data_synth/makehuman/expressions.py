@@ -69,24 +69,22 @@ def base_arkit_ict() -> tuple[np.ndarray, np.ndarray]:
     return _to_ict(named, a["full_deltas"], a["full_neutral"][:, 0])
 
 
+def expression_units(names, race: np.ndarray) -> np.ndarray:
+    """MakeHuman expression units by name on the base head, mixed by ``race`` (3,) as MakeHuman
+    weights them: (len(names),4326,3) float32 cm."""
+    z = assets.heads()
+    all_names = [str(n) for n in z["expr_unit_names"]]
+    rows = [all_names.index(n) for n in names]
+    scale = np.float32(z["deltas_scale_cm"])
+    q = z["target_deltas_q"][z["expr_unit_targets"][rows]].astype(np.float32) * scale
+    return np.tensordot(np.asarray(race, np.float32), q, axes=([0], [1]))   # q: (U,3,V,3)
+
+
 def base_units_ict(race: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """MakeHuman's expression units on the base head, mixed by ``race`` (3,) as MakeHuman
     weights them, in ICT order: ((53,4326,3) float32 cm, present (53,) bool)."""
-    z = assets.heads()
-    scale = np.float32(z["deltas_scale_cm"])
-    names = [str(n) for n in z["expr_unit_names"]]
-    used = [names.index(u) for u in UNIT_TO_ICT]
-    q = z["target_deltas_q"][z["expr_unit_targets"][used]].astype(np.float32) * scale  # (U,3,V,3)
-    mixed = np.tensordot(np.asarray(race, np.float32), q, axes=([0], [1]))
-    return _to_ict(UNIT_TO_ICT, mixed, z["full_neutral"][:, 0])
-
-
-def _unit(name: str, race: np.ndarray) -> np.ndarray:
-    """One MakeHuman expression unit on the base head, mixed by ``race`` (3,): (4326,3) cm."""
-    z = assets.heads()
-    i = [str(n) for n in z["expr_unit_names"]].index(name)
-    q = z["target_deltas_q"][z["expr_unit_targets"][i]].astype(np.float32)   # (3,V,3)
-    return np.tensordot(np.asarray(race, np.float32), q, axes=1) * np.float32(z["deltas_scale_cm"])
+    x = assets.heads()["full_neutral"][:, 0]
+    return _to_ict(UNIT_TO_ICT, expression_units(UNIT_TO_ICT, race), x)
 
 
 def _modifier_target(name: str) -> np.ndarray:
@@ -103,7 +101,8 @@ def region_weight(delta: np.ndarray, quantile: float = 0.9) -> np.ndarray:
     return np.clip(m / np.quantile(m[m > 0.05], quantile), 0.0, 1.0).astype(np.float32)
 
 
-def jaw_hinge(points: np.ndarray, delta: np.ndarray, weight: np.ndarray) -> tuple[float, float, float]:
+def jaw_hinge(points: np.ndarray, delta: np.ndarray,
+              weight: np.ndarray) -> tuple[float, float, float]:
     """(angle rad, y, z cm) of the rotation about an x-parallel axis through (y, z) that best
     explains a jaw-opening delta (V,3) on points (V,3), least squares weighted by weight (V,):
     to first order d_y = -a (z - z_h), d_z = a (y - y_h), linear in (a, a z_h, a y_h)."""
@@ -141,23 +140,28 @@ def base_surrogates_ict(race: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     p = z["full_neutral"].astype(np.float32)
     x, y = p[:, 0], p[:, 1]
     left = left_weight(x, 0.0, MIDLINE_CM)[:, None]
-    mouth_y = float((p[:, 1] * region_weight(_modifier_target("mouth/mouth-trans-up"))).sum()
-                    / region_weight(_modifier_target("mouth/mouth-trans-up")).sum())
+    mouth = region_weight(_modifier_target("mouth/mouth-trans-up"))
+    mouth_y = float((y * mouth).sum() / mouth.sum())
     upper_lip = left_weight(y, mouth_y, LIP_BAND_CM)[:, None]   # 1 above the mouth line
     t = _modifier_target
+    unit_names = ("mouth-retraction", "mouth-eversion", "mouth-parling", "mouth-open",
+                  "eye-left-closure", "eye-left-opened-up",
+                  "eye-right-closure", "eye-right-opened-up")
+    u = dict(zip(unit_names, expression_units(unit_names, race)))
     s: dict[str, np.ndarray] = {}
     for side, tag, w in (("_L", "l", left), ("_R", "r", 1.0 - left)):
         s["cheekPuff" + side] = t(f"cheek/{tag}-cheek-volume-incr")
         s["cheekSquint" + side] = t(f"cheek/{tag}-cheek-trans-up")
-        s["mouthDimple" + side] = w * (2.0 * t("mouth/mouth-dimples-in") + 0.3 * _unit("mouth-retraction", race))
+        s["mouthDimple" + side] = w * (2.0 * t("mouth/mouth-dimples-in")
+                                       + 0.3 * u["mouth-retraction"])
     s["mouthLeft"], s["mouthRight"] = t("mouth/mouth-trans-out"), t("mouth/mouth-trans-in")
     s["mouthShrugUpper"] = t("mouth/mouth-upperlip-middle-up")
     s["mouthShrugLower"] = t("mouth/mouth-lowerlip-middle-down") + 0.3 * t("chin/chin-height-decr")
-    eversion = _unit("mouth-eversion", race)
+    eversion = u["mouth-eversion"]
     s["mouthRollUpper"] = -upper_lip * eversion + 2.0 * t("mouth/mouth-upperlip-volume-decr")
     s["mouthRollLower"] = -(1.0 - upper_lip) * eversion + 2.0 * t("mouth/mouth-lowerlip-volume-decr")
-    s["mouthClose"] = -_unit("mouth-parling", race) + 0.5 * t("mouth/mouth-lowerlip-middle-down")
-    jaw_open = _unit("mouth-open", race)
+    s["mouthClose"] = -u["mouth-parling"] + 0.5 * t("mouth/mouth-lowerlip-middle-down")
+    jaw_open = u["mouth-open"]
     jaw = region_weight(jaw_open)
     _, _, hinge_z = jaw_hinge(p, jaw_open, jaw ** 2)
     zero = np.zeros_like(x)
@@ -165,9 +169,9 @@ def base_surrogates_ict(race: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     yaw = np.stack([JAW_YAW_RAD * (p[:, 2] - hinge_z), zero, -JAW_YAW_RAD * x], 1) * jaw[:, None]
     s["jawLeft"], s["jawRight"] = yaw, yaw * np.array([-1.0, 1.0, -1.0], np.float32)
     for side, tag, out_x in (("_L", "left", 1.0), ("_R", "right", -1.0)):
-        closure = _unit(f"eye-{tag}-closure", race)
+        closure = u[f"eye-{tag}-closure"]
         lids = region_weight(closure)[:, None]
-        s["eyeLookUp" + side] = 0.5 * _unit(f"eye-{tag}-opened-up", race)
+        s["eyeLookUp" + side] = 0.5 * u[f"eye-{tag}-opened-up"]
         s["eyeLookDown" + side] = 0.4 * closure
         s["eyeLookOut" + side] = lids * np.array([out_x * LID_SHIFT_CM, 0.0, 0.0], np.float32)
         s["eyeLookIn" + side] = -s["eyeLookOut" + side]
@@ -207,8 +211,8 @@ def identity_expressions(neutral: np.ndarray, race: np.ndarray, source: str = "a
                          style_seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The 53 shapes on an identity's head neutral (4326,3) cm: ((53,4326,3) float32, present).
 
-    source "arkit", "units" or "units_full" (module docstring); style_seed None = the source as authored, else
-    the rig's random style (``style_shapes``, and for "arkit" a blend of share U(0, 0.5) towards
+    source "arkit", "units" or "units_full" (module docstring); style_seed None = the source as
+    authored, else the rig's random style (``style_shapes``, and for "arkit" a blend of share U(0, 0.5) towards
     the mapped unit on the shapes that have one, with probability 1/2)."""
     base = assets.heads()["full_neutral"]
     faces = assets.heads()["full_faces"]
@@ -227,7 +231,8 @@ def identity_expressions(neutral: np.ndarray, race: np.ndarray, source: str = "a
         extra, has_extra = base_surrogates_ict(race)
         shapes, present = np.where(has_extra[:, None, None], extra, shapes), present | has_extra
     else:
-        raise ValueError(f"expression source must be 'arkit', 'units' or 'units_full', got {source!r}")
+        raise ValueError(f"expression source must be 'arkit', 'units' or 'units_full', "
+                         f"got {source!r}")
     deltas = np.zeros_like(shapes)
     deltas[present] = deformation_transfer(base, shapes[present], neutral, faces)
     if rng is not None:
