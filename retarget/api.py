@@ -213,6 +213,33 @@ class SourceRig:
         f = solve_triangular(self.free_chol, solve_triangular(self.free_chol, h, trans="T"))
         return f.astype(np.float32)
 
+    def fit_joint(self, frame: np.ndarray, w0: np.ndarray, prior: float,
+                  sparsity: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Weights w (53,) in [0,1] and free dims f (code_dim − 53,) fitted together (basis decoder
+        only): the minimiser of |neutral + w·deltas + f·F − frame|² + λ|w − w0|² + μ Σw + λ_f |f|²
+        (λ, μ as in ``fit``, λ_f the free ridge of ``fit_free``). f is unbounded, so it is
+        eliminated exactly: f(w) = (FFᵀ + λ_f)⁻¹ F (b − Aᵀw), and w solves a bounded least-squares
+        problem on the Schur complement S = AᵀA + λI − AᵀFᵀ(FFᵀ + λ_f)⁻¹FA (53×53; its factor is
+        made once per prior). Unlike ``fit`` then ``fit_free``, the free dims can take what the
+        weights would otherwise explain badly. frame (V,3) in the source's units -> (w, f)
+        float32."""
+        from scipy.linalg import solve_triangular
+
+        key = ("joint", prior)
+        if key not in self.factors:
+            cross = self.basis.astype(np.float64) @ self.free_basis.T.astype(np.float64)   # (53, F)
+            x = solve_triangular(self.free_chol, cross.T, trans="T")                      # R_f⁻ᵀ C ᵀ
+            ridge = prior * float(np.trace(self.gram)) / len(self.gram) + 1e-12
+            schur = self.gram + ridge * np.eye(len(self.gram)) - x.T @ x
+            self.factors[key] = (np.linalg.cholesky(schur).T, ridge, x)
+        chol, ridge, x = self.factors[key]
+        b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
+        gf = solve_triangular(self.free_chol, (self.free_basis @ b).astype(np.float64), trans="T")
+        w = self._bounded_solve(chol, (self.basis @ b).astype(np.float64) + ridge * w0 - x.T @ gf,
+                                sparsity)
+        f = solve_triangular(self.free_chol, gf - x @ w.astype(np.float64))
+        return w, f.astype(np.float32)
+
     def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float, sparsity: float = 0.0) -> np.ndarray:
         """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|² + μ Σw, λ =
         prior · mean diag(AᵀA), μ = sparsity · mean diag(AᵀA) (an L1 pull towards 0, which on
@@ -221,16 +248,21 @@ class SourceRig:
         R w ≈ R⁻ᵀ (Aᵀb + λ w0), which has the same minimiser as the full (3V+53)-row problem; the
         problem is convex, so the estimate enters as the prior, not as a starting point. When the
         unconstrained minimiser lies in [0,1] it is the answer and BVLS is skipped."""
-        from scipy.linalg import solve_triangular
-        from scipy.optimize import lsq_linear
-
         if prior not in self.factors:
             self.factors[prior] = _ridge_factor(self.gram, prior)
         chol, ridge = self.factors[prior]
         b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
-        h = (self.basis @ b).astype(np.float64) + ridge * w0
+        return self._bounded_solve(chol, (self.basis @ b).astype(np.float64) + ridge * w0, sparsity)
+
+    def _bounded_solve(self, chol: np.ndarray, h: np.ndarray, sparsity: float) -> np.ndarray:
+        """argmin over w in [0,1]^53 of wᵀRᵀRw − 2hᵀw + μ Σw (R = chol (53,53) upper-triangular,
+        h (53,) float64, μ = sparsity · mean diag(AᵀA)): the unconstrained minimiser when it lies in
+        the box, else BVLS on R w ≈ R⁻ᵀ h -> (53,) float32."""
+        from scipy.linalg import solve_triangular
+        from scipy.optimize import lsq_linear
+
         if sparsity > 0.0:
-            h -= 0.5 * sparsity * float(np.trace(self.gram)) / len(self.gram)
+            h = h - 0.5 * sparsity * float(np.trace(self.gram)) / len(self.gram)
         rhs = solve_triangular(chol, h, trans="T")
         w = solve_triangular(chol, rhs)
         if w.min() < 0.0 or w.max() > 1.0:
@@ -251,14 +283,19 @@ class Retargeter:
     #: decodes (the source frame explained as well as the rig can), stronger for the weights that
     #: invert returns, which also get an L1 pull towards 0 (``SourceRig.fit``: the baked one-hot
     #: shapes are not exactly the FACS shapes, and shapes that barely move the surface are not
-    #: identifiable from it); the ridge of the free dims (basis decoder); source rigs kept baked;
-    #: vertices decoded per gradient step of the free-dims refinement (MLP decoder). Tuned on a
-    #: tuning set apart from the eval's test set (docs/RESULTS.md, "Stage 7").
+    #: identifiable from it); the ridge of the free dims (basis decoder); whether transfer and
+    #: invert fit the weights and the free dims together (``SourceRig.fit_joint``; transfer
+    #: does: the frame is explained better; invert does not: the free dims would take what its
+    #: weights must say); source rigs kept baked; vertices decoded per gradient step of the
+    #: free-dims refinement (MLP decoder). Tuned on a tuning set apart from the eval's test set
+    #: (docs/RESULTS.md, "Stage 7" and "Refine: weights and free dims fitted together").
     REFINE_PRIOR = 1e-3
     REFINE_SPARSITY = 0.0
     REFINE_PRIOR_INVERT = 0.1
     REFINE_SPARSITY_INVERT = 0.02
     REFINE_FREE_PRIOR = 1e-3
+    REFINE_JOINT = True
+    REFINE_JOINT_INVERT = False
     SOURCE_RIGS_KEPT = 8
     REFINE_ROWS = 2000
 
@@ -410,7 +447,8 @@ class Retargeter:
         towards 0 with ``REFINE_SPARSITY_INVERT``."""
         z = self.expression_codes(frames, source_neutral, smooth, fps, progress, refine,
                                   refine_prior=self.REFINE_PRIOR_INVERT,
-                                  refine_sparsity=self.REFINE_SPARSITY_INVERT)
+                                  refine_sparsity=self.REFINE_SPARSITY_INVERT,
+                                  refine_joint=self.REFINE_JOINT_INVERT)
         return np.clip(z[..., :N_FACS], 0.0, 1.0).astype(np.float32)
 
     # --------------------------------------------------------------------------- analysis by synthesis
@@ -430,7 +468,8 @@ class Retargeter:
         return self._source_rigs[key]
 
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
-               prior: float | None = None, sparsity: float | None = None) -> np.ndarray:
+               prior: float | None = None, sparsity: float | None = None,
+               joint: bool | None = None) -> np.ndarray:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
@@ -440,18 +479,24 @@ class Retargeter:
         fixed vertices; 0 = the code is [w, 0]). frames: a Mesh or a list sharing the neutral's
         topology; z_ge (128,) or (T,128) -> the same shape, float32. prior: the weights' pull
         towards the encoder (default ``REFINE_PRIOR``); sparsity: their L1 pull towards 0
-        (``SourceRig.fit``; default ``REFINE_SPARSITY``)."""
+        (``SourceRig.fit``; default ``REFINE_SPARSITY``). joint: weights and free dims fitted
+        together (``SourceRig.fit_joint``, basis decoder; default ``REFINE_JOINT``)."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
                                 "--source-neutral on the command line)")
         frames, _ = source_frames(frames)
         z = np.asarray(z_ge, np.float32).reshape(len(frames), -1)
         rig = self.source_rig(source_neutral)
+        prior = self.REFINE_PRIOR if prior is None else prior
+        sparsity = self.REFINE_SPARSITY if sparsity is None else sparsity
+        joint = (self.REFINE_JOINT if joint is None else joint) and rig.free_basis is not None
         out = np.zeros_like(z)
         for i, frame in enumerate(frames):
-            out[i, :N_FACS] = rig.fit(frame.vertices, np.clip(z[i, :N_FACS], 0.0, 1.0),
-                                      self.REFINE_PRIOR if prior is None else prior,
-                                      self.REFINE_SPARSITY if sparsity is None else sparsity)
+            w0 = np.clip(z[i, :N_FACS], 0.0, 1.0)
+            if joint:
+                out[i, :N_FACS], out[i, N_FACS:] = rig.fit_joint(frame.vertices, w0, prior, sparsity)
+                continue
+            out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity)
             if rig.free_basis is not None:
                 out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             elif self.refine_steps > 0:
@@ -510,14 +555,15 @@ class Retargeter:
                          smooth: str | None = None, fps: float = 30.0,
                          progress: bool = False, refine: bool = False,
                          refine_prior: float | None = None,
-                         refine_sparsity: float | None = None) -> np.ndarray:
+                         refine_sparsity: float | None = None,
+                         refine_joint: bool | None = None) -> np.ndarray:
         """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), refined by
-        analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior`` and
-        ``refine_sparsity``), temporally
-        filtered when ``smooth`` is given (see ``invert``)."""
+        analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior``,
+        ``refine_sparsity`` and ``refine_joint``), temporally filtered when ``smooth`` is given
+        (see ``invert``)."""
         z = self.encode(source, source_neutral, progress)
         if refine:
-            z = self.refine(source, source_neutral, z, refine_prior, refine_sparsity)
+            z = self.refine(source, source_neutral, z, refine_prior, refine_sparsity, refine_joint)
         if smooth and z.ndim == 2:
             z = smooth_codes(z, smooth, fps)
         return z

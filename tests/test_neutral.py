@@ -215,6 +215,7 @@ def test_basis_decoder_fits_the_free_dims_exactly_on_its_own_rig(rig, weights):
     model = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2,
                                       neutral_channels=True))
     r = Retargeter(model, device="cpu")        # no refine_steps: a basis decoder needs none
+    r.REFINE_JOINT = False                     # the weights first, then the free dims
     neutral = Mesh(rig.neutral, rig.faces)
     src = r.source_rig(neutral)
     assert src.free_basis.shape == (model.cfg.code_dim - 53, 3 * len(rig.neutral))
@@ -240,6 +241,46 @@ def test_basis_decoder_fits_the_free_dims_exactly_on_its_own_rig(rig, weights):
     err = lambda code: np.square(flat(frame.vertices - rig.neutral)
                                  - flat(code[:53] @ src.basis + code[53:] @ src.free_basis)).sum()
     assert err(out) < 0.5 * err(np.concatenate([w, np.zeros_like(f)]))
+
+
+def test_joint_fit_solves_weights_and_free_dims_together(rig, weights):
+    torch.manual_seed(0)
+    model = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2,
+                                      neutral_channels=True))
+    r = Retargeter(model, device="cpu")
+    neutral = Mesh(rig.neutral, rig.faces)
+    src = r.source_rig(neutral)
+    frame = rig.evaluate(weights[:1])[0]             # not in the span of the tiny model's rig
+    w0 = np.full(53, 0.5, np.float32)
+    prior, sparsity = 1e-2, 0.01
+    w, f = src.fit_joint(frame, w0, prior, sparsity)
+    assert w.min() >= 0.0 and w.max() <= 1.0 and np.all(np.isfinite(f))
+    A, F = src.basis.astype(np.float64), src.free_basis.astype(np.float64)
+    b = (frame - rig.neutral).reshape(-1)
+    lam = prior * np.trace(src.gram) / 53
+    mu = sparsity * np.trace(src.gram) / 53
+
+    def objective(w, f):
+        return (np.square(w @ A + f @ F - b).sum() + lam * np.square(w - w0).sum() + mu * w.sum()
+                + src.free_ridge * np.square(f).sum())
+
+    # KKT: zero gradient in f; in w zero where free, pointing outwards at an active bound
+    res = w @ A + f @ F - b
+    gf = 2 * F @ res + 2 * src.free_ridge * f
+    gw = 2 * A @ res + 2 * lam * (w - w0) + mu
+    scale = np.abs(2 * A @ b).max()
+    assert np.abs(gf).max() < 1e-3 * scale
+    free = (w > 1e-6) & (w < 1 - 1e-6)
+    assert np.abs(gw[free]).max(initial=0) < 1e-3 * scale
+    assert np.all(gw[w <= 1e-6] > -1e-3 * scale) and np.all(gw[w >= 1 - 1e-6] < 1e-3 * scale)
+    # at least as good as the weights first, then the free dims (what refine does by default)
+    w_seq = src.fit(frame, w0, prior, sparsity)
+    assert objective(w, f) <= objective(w_seq, src.fit_free(frame, w_seq)) + 1e-9 * scale
+    # refine(joint=True) returns the same code
+    z = r.encode([Mesh(frame, rig.faces)], source_neutral=neutral)
+    out = r.refine([Mesh(frame, rig.faces)], neutral, z, prior, sparsity, joint=True)[0]
+    np.testing.assert_allclose(out, np.concatenate(
+        src.fit_joint(frame, np.clip(z[0, :53], 0, 1), prior, sparsity)), rtol=1e-6, atol=1e-6)
 
 
 # ------------------------------------------------------------------------------- CLI and eval

@@ -7,7 +7,8 @@ A variant sets the pull of the fitted weights towards the encoder's for transfer
 (``REFINE_FREE_PRIOR``) and the L1 pull of the inverted weights towards 0
 (``REFINE_SPARSITY_INVERT``), then runs the refine mode of ``retarget eval`` on the suites.
 Variants named "invert ..." change only inversion and run only its suites (``INVERSE_SUITES``);
-``TRANSFER_VARIANTS`` (not run by default) the L1 pull of transfer's fitted weights.
+``TRANSFER_VARIANTS`` (not run by default) the L1 pull of transfer's fitted weights;
+``JOINT_VARIANTS`` (not run by default) the joint fit of weights and free dims.
 
     OMP_NUM_THREADS=1 python docs/results/stage7/refine_priors.py CHECKPOINT OUT.json [VARIANT ...]
 """
@@ -28,6 +29,18 @@ VARIANTS = {  # name: (REFINE_PRIOR, REFINE_PRIOR_INVERT, REFINE_FREE_PRIOR, REF
 #: transfer with an L1 pull of its fitted weights towards 0 (``REFINE_SPARSITY``), on the
 #: transfer suites (``TRANSFER_SUITES``): name -> REFINE_SPARSITY, the rest as the bundled
 TRANSFER_VARIANTS = {f"transfer sparsity {mu}": mu for mu in (0.0, 0.002, 0.01, 0.05)}
+#: weights and free dims fitted together (``REFINE_JOINT``, ``REFINE_JOINT_INVERT``; the free-dims
+#: ridge ``REFINE_FREE_PRIOR``) beside the bundled settings, on the transfer and inverse suites
+JOINT_VARIANTS = {
+    "bundled": {},
+    "joint": {"REFINE_JOINT": True, "REFINE_JOINT_INVERT": True},
+    "joint, free 1e-2": {"REFINE_JOINT": True, "REFINE_JOINT_INVERT": True, "REFINE_FREE_PRIOR": 1e-2},
+    "joint, free 1e-1": {"REFINE_JOINT": True, "REFINE_JOINT_INVERT": True, "REFINE_FREE_PRIOR": 1e-1},
+    "joint, free 1e-4": {"REFINE_JOINT": True, "REFINE_FREE_PRIOR": 1e-4},
+    "joint, free 1e-5": {"REFINE_JOINT": True, "REFINE_FREE_PRIOR": 1e-5},
+    "joint, prior 1e-2": {"REFINE_JOINT": True, "REFINE_PRIOR": 1e-2},
+    "joint, prior 1e-4": {"REFINE_JOINT": True, "REFINE_PRIOR": 1e-4},
+}
 TRANSFER_SUITES = ("self", "cross_identity", "head_self", "head_cross_identity", "head_cross_topology")
 SUITES = ("self", "inverse", "real_rig", "head_self", "head_cross_identity", "head_inverse")
 INVERSE_SUITES = ("inverse", "real_rig", "head_inverse")
@@ -43,6 +56,8 @@ def summary(suite: str, e: dict) -> str:
 
 def variant(name: str) -> tuple[dict, tuple]:
     """The Retargeter attributes and the suites of a variant."""
+    if name in JOINT_VARIANTS:
+        return JOINT_VARIANTS[name], tuple(dict.fromkeys(TRANSFER_SUITES + INVERSE_SUITES))
     if name in TRANSFER_VARIANTS:
         return {"REFINE_SPARSITY": TRANSFER_VARIANTS[name]}, TRANSFER_SUITES
     keys = ("REFINE_PRIOR", "REFINE_PRIOR_INVERT", "REFINE_FREE_PRIOR", "REFINE_SPARSITY_INVERT")
