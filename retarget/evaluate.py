@@ -20,7 +20,9 @@ number below has exact ground truth unless a table says otherwise:
   real → procedural (GT = the other rig driven by the same FACS weights: *semantic*, not exact,
   because two artists' shapes of one name differ), per ARKit shape (one-hot) and on sampled weights;
   and the real rig's neutral driven from the true weights (mapped to ICT names; the decoder alone),
-  with the do-nothing error (the neutral itself) beside it.
+  with the do-nothing error (the neutral itself) beside it; and the floor, the unmoved neutral
+  given as the source frame and transferred onto itself (doing nothing is exact there, so it has
+  no ratio: an absolute error in mm²).
 
 - ``head_self``, ``head_cross_identity``, ``head_cross_topology``, ``head_cross_crop``: realistic
   held-out heads (``data_synth.makehuman``: ``sample_head_identity(seed + i, split="test")``, the
@@ -357,8 +359,10 @@ class EvalData:
 
     def real_cases(self) -> dict[str, dict[str, Case]]:
         """Real-rig cases by direction, each as one case of sampled weights and one of one-hot
-        ARKit shapes (``per_shape``). ICT weights are symmetrised on browInnerUp / cheekPuff so both
-        rigs receive equivalent weights."""
+        ARKit shapes (``per_shape``); and with the sampled ones ``unmoved``, the rig's neutral as
+        the source frame transferred onto itself (the floor: doing nothing is exact there). ICT
+        weights are symmetrised on browInnerUp / cheekPuff so both rigs receive equivalent
+        weights."""
         real, proc = self.real_rig(), self.rig(0)
         m = arkit_ict_matrix(real.names)
         sampled = ict_to_arkit_weights(self.weights("real_rig", 0, self.cfg["real_rig"]["expressions"]), m)
@@ -375,6 +379,8 @@ class EvalData:
                 "invert": Case("invert real", real, a, real, a, exact=True),
                 "animate": Case("animate real", real, a, real, a, exact=True),
             }
+        still = np.zeros((1, len(real.names)), np.float32)
+        out["sampled"]["unmoved"] = Case("real unmoved -> real", real, still, real, still, exact=True)
         return out
 
     def per_shape_names(self) -> list[str]:
@@ -855,10 +861,11 @@ def to_markdown(results: dict) -> str:
                    "driven by the same weights (semantic, not exact).\n")
         header = ["method", "real→real MSE (exact)", "invert: rig MSE (exact)",
                   "invert: weight MAE (exact)", "procedural→real MSE (semantic)",
-                  "real→procedural MSE (semantic)", "animate from true weights MSE (exact)"]
+                  "real→procedural MSE (semantic)", "animate from true weights MSE (exact)",
+                  "unmoved → itself MSE (the floor, exact)"]
         keys = [("real_to_real", "mse_mm2"), ("invert", "rig_mse_mm2"), ("invert", "weight_mae"),
                 ("procedural_to_real", "mse_mm2"), ("real_to_procedural", "mse_mm2"),
-                ("animate", "mse_mm2")]
+                ("animate", "mse_mm2"), ("unmoved", "mse_mm2")]
         rows = [[m] + [cell("real_rig", m, "sampled", *k) for k in keys]
                 for m in methods if m in r["methods"]]
         out.append(md_table(header, rows) + "\n")
@@ -869,7 +876,7 @@ def to_markdown(results: dict) -> str:
             rows = [[shape] + [cell("real_rig", m, "per_shape", shape, c) for c in cols]
                     for shape in r["shapes"]]
             out.append(f"<details><summary>Real rig per ARKit shape (one-hot), {m}</summary>\n\n"
-                       + md_table(["shape"] + header[1:], rows) + "\n\n</details>\n")
+                       + md_table(["shape"] + header[1:-1], rows) + "\n\n</details>\n")
     if "frame" in s:
         f = s["frame"]
         out.append("### Canonical frame under crops (no method: scale / the reference's, and the "

@@ -222,6 +222,11 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     assert set(real_methods) == {"full", "noskin", "do nothing", "closest point"}
     assert real_methods["closest point"]["sampled"]["real_to_real"]["mse_mm2"] < 1e-8
     assert "invert" not in real_methods["closest point"]["sampled"]
+    # the floor: the unmoved neutral onto itself; doing nothing is exact there, so no ratio
+    assert real_methods["do nothing"]["sampled"]["unmoved"]["mse_mm2"] == 0.0
+    assert real["sampled"]["unmoved"]["mse_mm2"] > 0
+    assert res["suites"]["real_rig"]["ratios"]["full"]["sampled"]["unmoved"]["mse_mm2"] is None
+    assert "unmoved.mse_mm2" not in real["per_shape"]["jawOpen"]
     ratio = res["suites"]["real_rig"]["ratios"]["full"]["sampled"]["real_to_real"]["mse_mm2"]
     assert ratio == pytest.approx(real["sampled"]["real_to_real"]["mse_mm2"]
                                   / real_methods["do nothing"]["sampled"]["real_to_real"]["mse_mm2"])
@@ -239,7 +244,7 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     for title in ("Self-retargeting", "Cross-identity", "Cross-topology", "Inverse rigging",
                   "Jitter", "Real ARKit rig", "Driving from FACS weights", "| full |",
                   "| oracle (u,v) |", "| do nothing | ", "(1.00×)", "Canonical frame under crops",
-                  "Realistic heads: cross-crop", "Realistic test heads"):
+                  "Realistic heads: cross-crop", "Realistic test heads", "the floor"):
         assert title in md
     pngs = sorted(heat.glob("*.png"))
     assert len(pngs) == len(TRANSFER_SUITES) and all(p.stat().st_size > 100 for p in pngs)
