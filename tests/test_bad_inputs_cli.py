@@ -54,7 +54,7 @@ def refused(capsys, argv, names, fragment, good, out_dir, bundled: bool = False)
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]
     errors = [ln for ln in lines if ln.startswith("error: ")]
     assert len(errors) == 1 and lines[-1] == errors[0] and "Traceback" not in err, err
-    assert all(ln.startswith("warning: ") for ln in lines[:-1]), err  # no Python warnings
+    assert all(ln.startswith(("warning: ", "note: ")) for ln in lines[:-1]), err  # no Python warnings
     assert len(errors[0]) <= 1000, errors[0][:200]
     for name in names:
         assert str(name) in errors[0], errors[0]

@@ -315,6 +315,21 @@ def test_invert_and_transfer_refine_on_the_command_line(files, tmp_path):
     assert (tmp_path / "t.obj").stat().st_size > 0
 
 
+def test_transfer_and_invert_advise_the_neutral_and_refine(files, tmp_path, capsys):
+    seq, neutral = files / "seq", files / "neutral.obj"
+    for extra, fragment in (([], "no --source-neutral"),
+                            (["--source-neutral", neutral], "without --refine"),
+                            (["--source-neutral", neutral, "--refine"], None)):
+        for i, command in enumerate((["invert", seq, "-o", tmp_path / f"w{len(extra)}.csv"],
+                                     ["transfer", seq / "frame_0.obj", neutral, "-o",
+                                      tmp_path / f"t{len(extra)}.obj"])):
+            capsys.readouterr()
+            assert _cli(files, *command, *extra) == 0
+            notes = [l for l in capsys.readouterr().err.splitlines() if l.startswith("note: ")]
+            assert notes == [] if fragment is None else (len(notes) == 1 and fragment in notes[0]), \
+                (command[0], extra, notes)
+
+
 @pytest.mark.parametrize("argv,fragment", [
     (["--refine"], "--refine needs --source-neutral"),
     (["--source-neutral", "NEUTRAL_OTHER"], "has 303 vertices, but the frames have 415"),

@@ -46,6 +46,28 @@ def check_neutral_args(args) -> None:
         raise RetargetError(f"--refine-steps must be >= 0, got {args.refine_steps}")
 
 
+def neutral_hint(args) -> str | None:
+    """The advice printed when transfer / invert run without the most accurate inputs: without
+    ``--source-neutral`` the expression is read from the frames alone; with it but without
+    ``--refine`` the frames are not fitted on the source's own rig (docs/RESULTS.md: several
+    times the error of both together)."""
+    if not args.source_neutral:
+        return ("note: no --source-neutral: the expression is read from the frames alone, several "
+                "times less accurately than with the performer's neutral mesh and --refine "
+                "(docs/RESULTS.md)")
+    if not args.refine:
+        return ("note: without --refine the frames are not fitted on the network's rig of the "
+                "source neutral; --refine is several times more accurate (docs/RESULTS.md)")
+    return None
+
+
+def print_neutral_hint(args) -> None:
+    """``neutral_hint`` on stderr, if any."""
+    hint = neutral_hint(args)
+    if hint:
+        print(hint, file=sys.stderr)
+
+
 def load_source_neutral(args, frames):
     """The ``--source-neutral`` mesh (None without it); RetargetError naming it when its vertex
     count is not the frames' (checked before the model is loaded)."""

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from ._common import (add_model_args, add_neutral_args, add_smooth_arg, check_neutral_args,
-                      load_source_neutral, retargeter)
+                      load_source_neutral, print_neutral_hint, retargeter)
 
 HELP = "inverse rigging: FRAMES (a mesh, folder or glob) -> a CSV of 53 named weights per frame"
 EXAMPLE = """retarget invert "capture/*.obj" -o weights.csv
@@ -30,6 +30,7 @@ def run(args) -> int:
     check_output(args.out, inputs, formats=(".csv",))
     frames = load_sequence(args.frames, up=args.up, forward=args.forward, force=args.force)
     neutral = load_source_neutral(args, frames)
+    print_neutral_hint(args)
     w = retargeter(args).invert(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
                                 refine=args.refine)
     write_weights_csv(args.out, w.reshape(len(frames), -1), names=args.names, fps=args.fps)

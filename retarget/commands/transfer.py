@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 from ._common import (add_model_args, add_neutral_args, add_smooth_arg, check_neutral_args,
-                      load_source_neutral, output_paths, retargeter, write_frames)
+                      load_source_neutral, output_paths, print_neutral_hint, retargeter,
+                      write_frames)
 
 HELP = "clone expression(s) of SRC (a mesh, a folder or a glob of frames) onto the neutral TGT"
 EXAMPLE = """retarget transfer actor/frame_0001.obj character_neutral.obj -o smile.obj
@@ -34,6 +35,7 @@ def run(args) -> int:
     output_paths(args.out, len(frames), inputs, args.format, target.n_vertices,   # the take's
                  len(target.faces), args.force)                                   # size, up front
     neutral = load_source_neutral(args, frames)
+    print_neutral_hint(args)
     r = retargeter(args)
     tgt = r.prepare(target)
     z = r.expression_codes(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
