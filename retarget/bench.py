@@ -476,7 +476,8 @@ def to_markdown(results: dict) -> str:
                        f"without, invert_refine = with it plus analysis-by-synthesis; baking the "
                        f"source's rig once: {fmt(ref['source_bake_s'])} s, then refine adds "
                        f"{fmt(ref['added_ms'])} ms a frame (median of Retargeter.refine alone"
-                       + (", the free dims solved exactly on the basis decoder's rig)."
+                       + (", transfer's: the weights and the free dims solved together, exactly, on "
+                          "the basis decoder's rig)."
                           if fr["decoder"] == "basis" else
                           f"), {fmt(ref.get(f'added_ms_{REFINE_STEPS}_steps'))} ms with "
                           f"{REFINE_STEPS} gradient steps on the free dims.") + "\n")
