@@ -116,6 +116,38 @@ def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:
     return model
 
 
+#: The DiffusionNet encoders, which ``warm_start`` widens to a larger ``NFSConfig.enc_width``.
+ENCODERS = ("identity_encoder", "expression_encoder", "skinning_encoder")
+
+
+def widen_encoder_tensor(key: str, src: torch.Tensor, dst: torch.Tensor, old: int, new: int) -> None:
+    """Write a trained DiffusionNet tensor ``src`` (width ``old``) into ``dst``, the same tensor of a
+    wider net (width ``new``), so that the wider net computes what the trained one did. key: the
+    name inside the net (``first.weight``, ``blocks.0.mlp.0.weight``, ...); dst holds its fresh
+    initialisation.
+
+    The new channels start at zero and stay there until training moves them: what writes them
+    (the first layer's and each block's last MLP layer's new rows) starts at zero. What reads
+    them (A, the blocks' first MLP layer, the last layer) keeps its random initialisation, so
+    gradients reach them; it multiplies zeros. So do the blocks' new hidden units, whose
+    outgoing weights start at zero. The gradient features of a zero channel are tanh(0) = 0, and
+    the blocks' MLP input [x, diffused x, gradient features] is widened segment by segment."""
+    if key.startswith("first."):                    # (W, c_in) / (W,): may also take new inputs
+        dst.zero_()
+        dst[tuple(slice(0, n) for n in src.shape)] = src
+    elif key.endswith("mlp.0.weight"):              # (W, 3W): three segments of W inputs
+        for k in range(3):
+            dst[:old, k * new:k * new + old] = src[:, k * old:(k + 1) * old]
+    elif key.endswith("mlp.3.weight") or key.endswith("mlp.3.bias"):
+        dst.zero_()
+        dst[tuple(slice(0, n) for n in src.shape)] = src
+    elif key.startswith("last.") or key.endswith(("log_time", "A_re.weight", "A_im.weight",
+                                                    "mlp.0.bias")):
+        dst[tuple(slice(0, n) for n in src.shape)] = src
+    else:
+        raise ValueError(f"warm_start: no rule to widen encoder tensor {key}")
+
+
 def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                ) -> dict[str, list[str]]:
     """Copy into ``model`` the weights of ``initial``, a model of another config (a new design
@@ -126,7 +158,9 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
     differ in kind (``mlp`` / ``basis``: the same shapes mean different things). The expression
     encoder's first layer, widened by the neutral channels (``NFSConfig.neutral_channels``, appended
     after [v, c]), takes the old columns and zeros for the new ones, so the warm-started encoder
-    computes what the old one did until training moves it. Everything else keeps its fresh
+    computes what the old one did until training moves it. The three DiffusionNet encoders of a
+    larger ``enc_width`` (the same number of blocks) are widened the same way
+    (``widen_encoder_tensor``). Everything else keeps its fresh
     initialisation, except a fresh decoder's last layer, which starts at zero: the warm-started
     model first predicts no displacement (doing nothing) rather than a random field whose large
     first gradients would pull the copied encoders around.
@@ -142,6 +176,7 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
         raise ValueError(f"no module {', '.join(unknown)} in the model (modules: "
                          f"{', '.join(sorted(known))})")
     fresh = set(fresh) | ({"decoder"} if model.cfg.decoder != initial.cfg.decoder else set())
+    widths = (initial.cfg.enc_width, model.cfg.enc_width)
     report: dict[str, list[str]] = {"copied": [], "widened": [], "fresh": []}
     with torch.no_grad():
         for name, tensor in new.items():
@@ -155,6 +190,10 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                   and src.shape[0] == tensor.shape[0] and src.shape[1] < tensor.shape[1]):
                 tensor.zero_()
                 tensor[:, :src.shape[1]] = src
+                report["widened"].append(name)
+            elif (name.split(".")[0] in ENCODERS and widths[0] < widths[1]
+                  and model.cfg.enc_blocks == initial.cfg.enc_blocks):
+                widen_encoder_tensor(name.split(".", 1)[1], src, tensor, *widths)
                 report["widened"].append(name)
             else:
                 report["fresh"].append(name)

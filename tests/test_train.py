@@ -305,6 +305,45 @@ def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_ne
     assert torch.count_nonzero(same.decoder[-1].weight) > 0    # a same-kind decoder keeps its init
 
 
+def test_warm_start_widens_the_encoders_without_changing_what_they_compute():
+    from data_synth.identity import sample_identity
+    from data_synth.rig import build_rig
+    from data_synth.tessellate import tessellate
+    from nets.model import NFSConfig, NFSModel
+    from retarget.checkpoint import warm_start
+    from retarget.prepare import IMAGE_CHANNELS, neutral_channels, prepare_mesh
+
+    torch.manual_seed(0)
+    old = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2, neutral_channels=True))
+    torch.manual_seed(1)
+    new = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2, neutral_channels=True,
+                                    enc_width=24))
+    report = warm_start(new, old)
+    assert not report["fresh"]
+    assert {n.split(".")[0] for n in report["widened"]} == {"identity_encoder", "expression_encoder",
+                                                            "skinning_encoder"}
+    assert new.expression_encoder.first.weight.shape[0] == 24
+    rig = build_rig(sample_identity(0, split="test"), tessellate(n_vertices=300, kind="regular"))
+    cfg = old.cfg
+    mesh = prepare_mesh(rig.neutral, rig.faces, cfg.k_eig, cfg.image_size,
+                        IMAGE_CHANNELS[cfg.image_channels])
+    feat, img, ops = mesh.torch_inputs("cpu")
+    frame = mesh.canon.to_canonical(rig.evaluate(np.full(53, 0.3))).astype(np.float32)
+    channels = torch.from_numpy(neutral_channels(frame, mesh.vertices, mesh.faces))
+    with torch.no_grad():
+        c = old.image_code(img)[0]
+        for ch in (None, channels):
+            torch.testing.assert_close(new.encode_expression(feat, c, ops, ch),
+                                       old.encode_expression(feat, c, ops, ch), rtol=1e-5, atol=1e-6)
+        a, b = old.encode_target(feat, c, ops), new.encode_target(feat, c, ops)
+        torch.testing.assert_close(b.z_id, a.z_id, rtol=1e-5, atol=1e-6)
+        torch.testing.assert_close(b.z_skin, a.z_skin, rtol=1e-5, atol=1e-6)
+    # the new channels train: one step of a loss on the code moves the weights that write them
+    new.zero_grad()
+    new.encode_expression(feat, c, ops).square().sum().backward()
+    assert new.expression_encoder.first.weight.grad[16:].abs().sum() > 0
+
+
 def test_warm_start_can_start_named_modules_fresh_where_they_fit():
     from nets.model import NFSConfig, NFSModel
     from retarget.checkpoint import warm_start
