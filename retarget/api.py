@@ -156,10 +156,15 @@ def basis_shapes(target: "Target", dims: slice) -> np.ndarray:
     return np.ascontiguousarray(target.proxy.canon.displacement_from_canonical(shapes), np.float32)
 
 
+def _ridge(gram: np.ndarray, prior: float) -> float:
+    """λ = ``prior`` · mean diag(AᵀA) for the Gram matrix AᵀA (K,K) of a linear model."""
+    return prior * float(np.trace(gram)) / len(gram) + 1e-12
+
+
 def _ridge_factor(gram: np.ndarray, prior: float) -> tuple[np.ndarray, float]:
     """For the Gram matrix AᵀA (K,K) float64 of a linear model: (upper-triangular R (K,K) with
-    RᵀR = AᵀA + λI, λ), λ = ``prior`` · mean diag(AᵀA)."""
-    ridge = prior * float(np.trace(gram)) / len(gram) + 1e-12
+    RᵀR = AᵀA + λI, λ), λ = ``_ridge(gram, prior)``."""
+    ridge = _ridge(gram, prior)
     return np.linalg.cholesky(gram + ridge * np.eye(len(gram))).T, ridge
 
 
@@ -229,7 +234,7 @@ class SourceRig:
         if key not in self.factors:
             cross = self.basis.astype(np.float64) @ self.free_basis.T.astype(np.float64)   # (53, F)
             x = solve_triangular(self.free_chol, cross.T, trans="T")                      # R_f⁻ᵀ C ᵀ
-            ridge = prior * float(np.trace(self.gram)) / len(self.gram) + 1e-12
+            ridge = _ridge(self.gram, prior)
             schur = self.gram + ridge * np.eye(len(self.gram)) - x.T @ x
             self.factors[key] = (np.linalg.cholesky(schur).T, ridge, x)
         chol, ridge, x = self.factors[key]

@@ -132,20 +132,24 @@ def widen_encoder_tensor(key: str, src: torch.Tensor, dst: torch.Tensor, old: in
     gradients reach them; it multiplies zeros. So do the blocks' new hidden units, whose
     outgoing weights start at zero. The gradient features of a zero channel are tanh(0) = 0, and
     the blocks' MLP input [x, diffused x, gradient features] is widened segment by segment."""
-    if key.startswith("first."):                    # (W, c_in) / (W,): may also take new inputs
-        dst.zero_()
-        dst[tuple(slice(0, n) for n in src.shape)] = src
-    elif key.endswith("mlp.0.weight"):              # (W, 3W): three segments of W inputs
+    if key.startswith("first.") or ".mlp.3." in key:   # writers of the channels; first.weight
+        _embed(src, dst, zero=True)                      # (W, c_in) may also take new inputs
+    elif key.endswith("mlp.0.weight"):                 # (W, 3W): three segments of W inputs
         for k in range(3):
             dst[:old, k * new:k * new + old] = src[:, k * old:(k + 1) * old]
-    elif key.endswith("mlp.3.weight") or key.endswith("mlp.3.bias"):
-        dst.zero_()
-        dst[tuple(slice(0, n) for n in src.shape)] = src
     elif key.startswith("last.") or key.endswith(("log_time", "A_re.weight", "A_im.weight",
                                                     "mlp.0.bias")):
-        dst[tuple(slice(0, n) for n in src.shape)] = src
+        _embed(src, dst, zero=False)
     else:
         raise ValueError(f"warm_start: no rule to widen encoder tensor {key}")
+
+
+def _embed(src: torch.Tensor, dst: torch.Tensor, zero: bool) -> None:
+    """``src`` written into the leading block of the larger ``dst`` of the same rank; the rest of
+    ``dst`` zeroed when ``zero``, else kept."""
+    if zero:
+        dst.zero_()
+    dst[tuple(slice(0, n) for n in src.shape)] = src
 
 
 def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
@@ -188,8 +192,7 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                 report["copied"].append(name)
             elif (name == "expression_encoder.first.weight" and src.dim() == 2
                   and src.shape[0] == tensor.shape[0] and src.shape[1] < tensor.shape[1]):
-                tensor.zero_()
-                tensor[:, :src.shape[1]] = src
+                _embed(src, tensor, zero=True)
                 report["widened"].append(name)
             elif (name.split(".")[0] in ENCODERS and widths[0] < widths[1]
                   and model.cfg.enc_blocks == initial.cfg.enc_blocks):
