@@ -1,7 +1,9 @@
 """The accuracy suites of ``retarget eval`` (DESIGN.md section 6), as plain dicts and markdown.
 
-Test data are procedural rigs of *test* identities (``sample_identity(i, split="test")``), so every
-number below has exact ground truth unless a table says otherwise:
+Test data are procedural rigs of *test* identities (``sample_identity(i, split="test")``; an eval
+config with ``split: val`` draws validation identities instead, e.g. ``configs/eval/validation.yaml``
+for choosing between models), so every number below has exact ground truth unless a table says
+otherwise:
 
 - ``self``: source = target = one identity on one tessellation; GT = that rig with the source's weights.
 - ``cross_identity``: source identity A → target identity B (same tessellation); GT = B's rig with A's
@@ -104,6 +106,11 @@ NEUTRAL_MODES = {"none": "no neutral", "neutral": "neutral", "refine": "neutral 
 
 
 # ------------------------------------------------------------------------------------- config
+#: The identity splits an eval config may draw its rigs from (``split``): the test set, or the
+#: validation identities, to choose between models without looking at the test set. Never train.
+EVAL_SPLITS = ("test", "val")
+
+
 def load_eval_config(path=None) -> dict:
     """The eval config: ``configs/eval/default.yaml`` (every key, the committed settings), with the
     keys of ``path`` (a file, e.g. ``configs/eval/tiny.yaml``, or a shipped name such as ``tiny``)
@@ -115,7 +122,10 @@ def load_eval_config(path=None) -> dict:
     path = find_config(path, "eval")
     if path.resolve() == default.resolve():
         return base
-    return merge(base, read_yaml(path, "eval config"), str(path))
+    cfg = merge(base, read_yaml(path, "eval config"), str(path))
+    if cfg["split"] not in EVAL_SPLITS:
+        raise RetargetError(f"{path}: split must be one of {', '.join(EVAL_SPLITS)}, got {cfg['split']!r}")
+    return cfg
 
 
 def real_rig_path(cfg: dict) -> Path:
@@ -272,7 +282,7 @@ class EvalData:
         spec = spec or self.cfg["tessellation"]
         key = (identity, tuple(sorted(spec.items())))
         if key not in self._rigs:
-            z_id = sample_identity(self.cfg["seed"] + identity, split="test")
+            z_id = sample_identity(self.cfg["seed"] + identity, split=self.cfg["split"])
             self._rigs[key] = build_rig(z_id, self.tessellation(spec), self.cfg["n_segments"])
         return self._rigs[key]
 
@@ -284,7 +294,7 @@ class EvalData:
         h = self.cfg["heads"]
         spec = spec or h["tessellation"]
         if identity not in self._head_bases:
-            z = sample_head_identity(self.cfg["seed"] + identity, split="test")
+            z = sample_head_identity(self.cfg["seed"] + identity, split=self.cfg["split"])
             self._head_bases[identity] = base_head_rig(z, h["shapes"])
         key = ("head", identity, tuple(sorted(spec.items())))
         if key not in self._rigs:
@@ -790,6 +800,9 @@ def to_markdown(results: dict) -> str:
     followed by its ratio to the do-nothing row's error of the same cases, e.g. 7.29 (0.27×)."""
     s, methods = results["suites"], results["methods"]
     out = []
+    if results.get("config", {}).get("split", "test") != "test":
+        out.append(f"**Identities of the {results['config']['split']!r} split, not the test set** "
+                   f"(eval config ``split``; the real rig is the same one).\n")
 
     def dig(d, keys):
         for k in keys:
@@ -981,6 +994,7 @@ def merge_results(paths) -> dict:
         try:
             res = json.loads(path.read_text())
             config, methods, suites = res["config"], res["methods"], res["suites"]
+            config.setdefault("split", "test")  # eval.json files from before the key: the test split
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise RetargetError(f"{path}: not an eval.json written by `retarget eval` ({e})") from None
         if merged is None:

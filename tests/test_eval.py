@@ -322,6 +322,25 @@ def test_config_and_checkpoint_errors(tmp_path):
     assert main(["eval", "--config", str(TINY), "--checkpoint", str(tmp_path / "x.pt")]) == 2
 
 
+def test_split_val_draws_validation_identities_and_a_bad_split_is_named(tmp_path):
+    cfg = tiny_config()
+    assert cfg["split"] == "test"
+    val = dict(cfg, split="val")
+    test_rig, val_rig = EvalData(cfg).rig(0), EvalData(val).rig(0)
+    assert val_rig.neutral.shape == test_rig.neutral.shape
+    assert not np.allclose(val_rig.neutral, test_rig.neutral)
+    expected = build_rig(sample_identity(0, split="val"), tessellate(seed=0, **cfg["tessellation"]),
+                         cfg["n_segments"])
+    np.testing.assert_array_equal(val_rig.neutral, expected.neutral)
+    assert "'val' split, not the test set" in to_markdown({"methods": [], "suites": {}, "config": val})
+    assert "not the test set" not in to_markdown({"methods": [], "suites": {}, "config": cfg})
+    bad = tmp_path / "bad_split.yaml"
+    bad.write_text("split: train\n")
+    with pytest.raises(RetargetError, match=r"bad_split\.yaml: split must be one of test, val, got 'train'"):
+        load_eval_config(bad)
+    assert load_eval_config(ROOT / "configs" / "eval" / "validation.yaml")["split"] == "val"
+
+
 def test_a_missing_real_rig_leaves_its_suite_out_unless_asked_for(tmp_path, capsys):
     ck = tiny_checkpoint(tmp_path / "m.pt")
     cfg = tmp_path / "norig.yaml"
