@@ -30,16 +30,17 @@ def test_target_checks():
                                               "animate": {"throughput_fps": 4.0},
                                               "baked": {"throughput_fps": 900.0},
                                               "invert": {"throughput_fps": 12.0, "latency_ms": 80.0},
-                                              "invert_no_neutral": {"latency_ms": 80.0},
-                                              "invert_refine": {"added_ms": 25.0}}}
+                                              "invert_no_neutral": {"latency_ms": 120.0},
+                                              "invert_refine": {"added_ms": 25.0, "added_invert_ms": 5.0}}}
     results = {"prepare": {"cpu": [{"n_vertices": 1_001_000, "seconds": 100.0, "peak_rss_mb": 9000.0},
                                    {"n_vertices": 98_000, "seconds": 16.0, "peak_rss_mb": 900.0}]},
                "frames": {"cpu": frames, "cuda": {**frames, "n_vertices": 2000}}}
     met = {t["target"]: t["met"] for t in check_targets(results)}
     assert met == {"prepare_100k_s": False, "prepare_1M_s": True, "prepare_1M_peak_gb": False,
                    "transfer_fps": True, "animate_fps": False, "baked_fps": True, "invert_fps": True,
-                   "transfer_call_fps": False, "invert_call_fps": True,   # 4 and 12.5 per call
-                   "refine_added_ms": False}
+                   "transfer_call_fps": False, "invert_call_fps": False,  # 4 and 8.3 per call
+                   "invert_neutral_call_fps": True,                        # 12.5 per call
+                   "refine_added_ms": False, "refine_added_invert_ms": True}
     assert all(t["device"] == "cpu" for t in check_targets(results))   # 2k frames: no target
 
 
@@ -81,6 +82,7 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
         assert fr["model"][op]["latency_ms"] > 0 and fr["model"][op]["throughput_fps"] > 0
     assert fr["model"]["invert_refine"]["source_bake_s"] > 0
     assert fr["model"]["invert_refine"]["added_ms_10_steps"] > 0 and fr["model"]["invert_refine"]["added_ms"] > 0
+    assert fr["model"]["invert_refine"]["added_invert_ms"] > 0
     assert res["train"]["samples_per_s"] > 0 and res["train"]["steps_timed"] == 2
     without = {w["trick"]: w["samples_per_s"] for w in res["train"]["without"]}
     assert len(without) == 3 and all(v > 0 for v in without.values())
