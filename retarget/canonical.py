@@ -141,13 +141,16 @@ def surface_samples(vertices: np.ndarray, faces: np.ndarray,
     nz = np.abs(normal[:, 2]) / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)
     edge = np.linalg.norm((tri - tri[:, [1, 2, 0]])[..., :2], axis=-1).max(axis=1)
     n = np.clip(np.ceil(edge / spacing), 1, 64).astype(np.int64)
+    order = np.argsort(n, kind="stable")                         # triangles grouped by their n
+    tri, nz, n = tri[order], nz[order], n[order]
+    steps, starts = np.unique(n, return_index=True)
     points, nzs = [], []
-    for k in np.unique(n):
+    for k, a, b in zip(steps, starts, np.r_[starts[1:], len(n)]):
         i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
         keep = (i + j) <= k
         bary = np.stack([k - i[keep] - j[keep], i[keep], j[keep]], axis=1) / k   # (P,3)
-        points.append((bary @ tri[n == k]).reshape(-1, 3))      # (f,P,3); matmul, not einsum: 9x
-        nzs.append(np.repeat(nz[n == k], len(bary)))
+        points.append((bary @ tri[a:b]).reshape(-1, 3))         # (f,P,3); matmul, not einsum: 9x
+        nzs.append(np.repeat(nz[a:b], len(bary)))
     return np.concatenate(points), np.concatenate(nzs)
 
 
@@ -156,9 +159,10 @@ def front_height_field(points: np.ndarray, nz: np.ndarray, lo: np.ndarray, cell:
     """The front surface seen along −z on a grid: cell (i, j) covers x = lo[0] + i·cell,
     y = lo[1] + j·cell. points (N,3), nz (N,) from :func:`surface_samples`.
     Returns (height (H,W): max z, −inf where empty; front_nz (H,W): |n_z| there, 0 where empty)."""
-    ij = np.floor((points[:, :2] - lo) / cell).astype(np.int64)
-    ok = ((ij >= 0) & (ij < np.array(shape))).all(axis=1)
-    key = ij[ok, 0] * shape[1] + ij[ok, 1]
+    i = np.floor((points[:, 0] - lo[0]) / cell)                  # one column at a time: 3x faster
+    j = np.floor((points[:, 1] - lo[1]) / cell)                  # than on the (N,2) slice
+    ok = (i >= 0) & (i < shape[0]) & (j >= 0) & (j < shape[1])
+    key = i[ok].astype(np.int64) * shape[1] + j[ok].astype(np.int64)
     z, nz = points[ok, 2], nz[ok]
     height = np.full(shape[0] * shape[1], -np.inf)
     np.maximum.at(height, key, z)
