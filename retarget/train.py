@@ -34,6 +34,7 @@ from .errors import RetargetError
 from .metrics import CM_TO_MM, segment_mse_mm2
 from .prepare import IMAGE_CHANNELS, vertex_features
 from .render import render_frontal
+from .prefetch import PrefetchPool
 from .training_data import Group, make_pool, validation_entries
 
 DEFAULTS = {
@@ -59,7 +60,10 @@ DEFAULTS = {
              "bp": 1.0, "br": 1.0, "nll": 1.0, "rig": 0.0, "free_dims_dropout": 0.0},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
     "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
-              "ckpt_minutes": 5.0},
+              "ckpt_minutes": 5.0,
+              # processes preparing the samples of the next steps (retarget.prefetch); 0 = in the
+              # training process. The samples are the same either way.
+              "data_workers": 0},
 }
 
 
@@ -93,6 +97,7 @@ VALUE_RULES = {
     ("train", "steps"): (int, 1, None, True), ("train", "seed"): (int, 0, None, True),
     ("train", "log_every"): (int, 1, None, True), ("train", "val_every"): (int, 1, None, True),
     ("train", "max_minutes"): (float, 0.0, None, True), ("train", "ckpt_minutes"): (float, 0.0, None, True),
+    ("train", "data_workers"): (int, 0, 256, True),
     ("optim", "lr"): (float, 0.0, None, False), ("optim", "weight_decay"): (float, 0.0, None, True),
     ("optim", "warmup_steps"): (int, 0, None, True), ("optim", "grad_clip"): (float, 0.0, None, False),
     ("data", "n_identities"): (int, 1, None, True), ("data", "pool_size"): (int, 1, None, True),
@@ -368,7 +373,9 @@ class Trainer:
                 dist.broadcast(p.data, 0)
         self.opt = torch.optim.AdamW(self.model.parameters(), lr=cfg["optim"]["lr"],
                                      weight_decay=cfg["optim"]["weight_decay"])
-        self.pool = make_pool(cfg["data"], self.model_cfg, seed)
+        workers = cfg["train"]["data_workers"]
+        self.pool = (PrefetchPool(cfg["data"], self.model_cfg, seed, workers, self.rank) if workers
+                     else make_pool(cfg["data"], self.model_cfg, seed))
         self.step, self.elapsed = 0, 0.0
         self.config_path = config_path
         self.progress = progress and self.rank == 0
@@ -493,6 +500,8 @@ class Trainer:
         finally:
             bar.close()
             signal.signal(signal.SIGINT, previous)
+            if isinstance(self.pool, PrefetchPool):
+                self.pool.close()
         self.save()
         self.export(self.out / "model.pt")
         return metrics

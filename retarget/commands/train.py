@@ -9,6 +9,7 @@ from pathlib import Path
 HELP = "train the network from a config (resumable; torchrun for several processes)"
 EXAMPLE = """retarget train --config configs/train/default.yaml --out runs/default
 retarget train --config configs/train/default.yaml --out runs/default --resume
+retarget train --config realistic_rig --data-workers 4 --out runs/fast   # samples made by 4 processes
 retarget train --config configs/train/no_bp.yaml --steps 1500 --max-minutes 0 --out runs/no_bp  # fixed step budget
 torchrun --nproc_per_node 2 -m retarget.cli train --config configs/train/tiny.yaml --out runs/ddp
 retarget train --rig my_rig.npz --init runs/default/model.pt --out runs/mine    # fine-tune
@@ -49,13 +50,17 @@ def add_arguments(p):
                    help="override train.max_minutes (0 = no time limit: the budget and the "
                         "learning-rate schedule follow --steps only, whatever else runs on the "
                         "machine)")
+    p.add_argument("--data-workers", type=int, metavar="N",
+                   help="override train.data_workers: N processes prepare the samples of the next "
+                        "steps while the model trains (the same samples; 0 = in the training "
+                        "process)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def training_config(args) -> tuple[dict, str]:
     """(config, its path) from the arguments: --config, or with --rig the fine-tuning config whose
     model is the --init checkpoint's; --rig, --keep-vertices, --strict, --rig-mix, --steps, --lr, --seed
-    and --max-minutes applied."""
+    --max-minutes and --data-workers applied."""
     from ..config import find_config
     from ..errors import RetargetError
     from ..train import load_checkpoint, load_config
@@ -98,6 +103,10 @@ def training_config(args) -> tuple[dict, str]:
         if not args.max_minutes >= 0 or args.max_minutes == float("inf"):
             raise RetargetError(f"--max-minutes must be >= 0, got {args.max_minutes}")
         cfg["train"]["max_minutes"] = args.max_minutes
+    if args.data_workers is not None:
+        if args.data_workers < 0:
+            raise RetargetError(f"--data-workers {args.data_workers}: must be >= 0")
+        cfg["train"]["data_workers"] = args.data_workers
     return cfg, path
 
 
