@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# Run THERE (the device machine, through the device tool's `run`, which starts in the repository
+# root and sends back what is under $OUT), after training/gpu/prepare.sh here:
+#   run(command="bash training/gpu/run.sh", carry=[".whl", ".gl"], timeout_s=590)
+# 1. installs the carried wheels and GL loaders; 2. a CUDA smoke test (the tiny config, 20 steps);
+# 3. times MEASURE_STEPS steps of CONFIG with data_workers 0 and WORKERS (samples/s of each);
+# 4. trains CONFIG from INIT on a fresh cosine schedule at LR for as many steps as fit TRAIN_S
+#    seconds at the rate measured with WORKERS, and copies model.pt, last.pt and train_log.csv
+#    to $OUT (what comes back: at most 8 files of 16 MiB).
+# Everything is written to $OUT/log.txt as it goes, so a run stopped at its limit still says
+# where it was. Settings (environment): CONFIG, INIT, LR, WORKERS, TRAIN_S, MEASURE_STEPS, SEED;
+# SKIP_INSTALL=1 for a dry run here, e.g. (the tiny model of the smoke test as INIT):
+#   PATH=.venv/bin:$PATH SKIP_INSTALL=1 CONFIG=tiny INIT=/tmp/smoke/model.pt WORKERS=1 TRAIN_S=10 MEASURE_STEPS=10 OUT=/tmp/gpu_out bash training/gpu/run.sh
+set -uo pipefail
+CONFIG=${CONFIG:-realistic_rig_partial}
+INIT=${INIT:-retarget/checkpoints/default.pt}
+LR=${LR:-5e-5}
+WORKERS=${WORKERS:-14}
+TRAIN_S=${TRAIN_S:-360}
+MEASURE_STEPS=${MEASURE_STEPS:-60}
+SEED=${SEED:-1}
+OUT=${OUT:-runs/gpu_out}
+mkdir -p "$OUT"
+LOG="$OUT/log.txt"
+exec > >(tee -a "$LOG") 2>&1
+export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1
+t0=$(date +%s)
+stamp() { echo "[$(( $(date +%s) - t0 )) s] $*"; }
+
+stamp "install"
+if [ -n "${SKIP_INSTALL:-}" ]; then :   # a dry run on a machine that has the dependencies
+elif [ -d .gl ]; then for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig; fi
+if [ -z "${SKIP_INSTALL:-}" ] && [ -d .whl ]; then
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
+  export PYTHONPATH=/tmp/site:$PWD
+fi
+[ -f /usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json ] && \
+  export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
+python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())" || exit 1
+python3 -c "
+import numpy as np
+from retarget.render import render_frontal
+img = render_frontal(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.5]], float), np.array([[0, 1, 2]]), 32)
+assert img.shape[-2:] == (32, 32) and img.max() > 0, 'the EGL render is empty'
+print('EGL render ok', img.shape)" || exit 1
+train() { python3 -m retarget.cli train --no-progress --max-minutes 0 --seed "$SEED" "$@"; }
+
+stamp "smoke: tiny config on CUDA, 20 steps"
+train --config tiny --steps 20 --out /tmp/smoke || { stamp "smoke test failed"; exit 1; }
+
+rate() {  # samples/s over the run's logged steps: steps x sources / logged training time
+  python3 - "$1" <<'PY'
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+print(f"{float(rows[-1]['step']) / float(rows[-1]['elapsed_s']):.3f}")
+PY
+}
+for w in 0 "$WORKERS"; do
+  stamp "measure: $MEASURE_STEPS steps of $CONFIG with data_workers $w"
+  train --config "$CONFIG" --init "$INIT" --steps "$MEASURE_STEPS" --lr "$LR" --data-workers "$w" \
+    --out "/tmp/measure_$w" > "/tmp/measure_$w.txt" 2>&1 || { tail -20 "/tmp/measure_$w.txt"; exit 1; }
+  stamp "steps/s with $w workers: $(rate /tmp/measure_$w/train_log.csv)"
+done
+steps_per_s=$(rate "/tmp/measure_$WORKERS/train_log.csv")
+STEPS=$(python3 -c "print(max(100, int($steps_per_s * $TRAIN_S) // 100 * 100))")
+stamp "train: $STEPS steps of $CONFIG from $INIT at lr $LR with $WORKERS workers"
+train --config "$CONFIG" --init "$INIT" --steps "$STEPS" --lr "$LR" --data-workers "$WORKERS" \
+  --out /tmp/gpu_run
+cp /tmp/gpu_run/model.pt /tmp/gpu_run/last.pt /tmp/gpu_run/train_log.csv "$OUT"/ 2>/dev/null
+stamp "done: $(tail -1 /tmp/gpu_run/train_log.csv)"
