@@ -3,7 +3,7 @@
 A training step's sample is a pure function of the step (``training_data``: the pool's slots are
 a function of (seed, slot, step), the draw is seeded with (seed, step, rank)), so it can be made
 by any process holding its own copy of the pool. :class:`PrefetchPool` starts ``workers``
-processes, each with its own pool, hands step s to worker s mod workers, and keeps ``ahead``
+processes, each with its own pool, hands step s to worker s mod workers, and keeps ``AHEAD``
 steps per worker in flight. The trainer gets exactly the groups that the in-process pool would
 give (a test compares them), while the model's forward and backward pass run in the main process
 beside the preparation of the next steps: the rig, operators and frontal images of new pool
