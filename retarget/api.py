@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from data_synth.facs import FACS_INDEX, N_FACS
-from nets.geometry import Operators, TorchOperators, load_or_compute_operators
+from nets.geometry import Operators, TorchOperators, load_or_compute_operators, vertex_normals
 from nets.model import NFSModel, TargetCodes, weights_to_code
 
 from .canonical import Canonicaliser
@@ -118,6 +118,8 @@ class SourceTopology:
     cluster: (V,) int64 proxy vertex of each source vertex, or None (the mesh itself is encoded).
     canon: the canonicaliser of the reference mesh (the source neutral, or the first frame seen).
     ops: the operators of the reference's canonical mesh; ops_t: the same on the device.
+    neutral: for an entry of a source neutral, (its proxy's canonical vertices (V',3) float32, their
+    unit normals (V',3) float64) -- the reference of the neutral channels, made on first use.
     """
 
     faces: np.ndarray
@@ -125,6 +127,7 @@ class SourceTopology:
     canon: Canonicaliser
     ops: Operators
     ops_t: TorchOperators
+    neutral: tuple[np.ndarray, np.ndarray] | None = None
 
     def proxy(self, mesh: Mesh) -> Mesh:
         """The mesh the encoder sees for a frame of this topology: the frame, or its proxy (each
@@ -426,8 +429,10 @@ class Retargeter:
             src.proxy(ref).vertices, name=ref.name or "source", kind=self.cfg.canonical,
             faces=src.faces)
         use_neutral = self.cfg.neutral_channels and neutral is not None
-        # the neutral in its own canonical frame: the reference of the encoder's neutral channels
-        base = canon.to_canonical(src.proxy(neutral).vertices).astype(np.float32) if use_neutral else None
+        if use_neutral and src.neutral is None:
+            # the neutral in its own canonical frame: the reference of the encoder's neutral channels
+            base = canon.to_canonical(src.proxy(neutral).vertices).astype(np.float32)
+            src.neutral = (base, vertex_normals(base.astype(np.float64), src.faces))
         codes = []
         for f in tqdm(frames, desc="encoding", unit="frame", disable=not progress or len(frames) < 2):
             if f.n_vertices != ref.n_vertices:
@@ -436,7 +441,8 @@ class Retargeter:
             p = self._prepare(src.proxy(f), canon=canon, ops=src.ops)
             feat = torch.from_numpy(p.feat).to(self.device)
             img = torch.from_numpy(p.image)[None].to(self.device)
-            channels = (torch.from_numpy(neutral_channels(p.vertices, base, p.faces))
+            channels = (torch.from_numpy(neutral_channels(p.vertices, src.neutral[0], p.faces,
+                                                          p.normals, src.neutral[1]))
                         .to(self.device) if use_neutral else None)
             codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], src.ops_t,
                                                       channels))

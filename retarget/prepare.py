@@ -29,6 +29,8 @@ class PreparedMesh:
     feat: (V,6) float32 per-vertex features v = [canonical position, unit vertex normal].
     ops: the DiffusionNet operators of the (canonical) surface.
     image: (C,H,W) float32 frontal render in [0,1] (the CNN input).
+    normals: (V,3) float64 unit vertex normals of ``vertices`` (computed once, shared by the
+    features, the render and the neutral channels), or None.
     The torch copies of ``ops`` are kept per device once made (a training target or source is used
     for many steps).
     """
@@ -39,6 +41,7 @@ class PreparedMesh:
     feat: np.ndarray
     ops: Operators
     image: np.ndarray
+    normals: np.ndarray | None = None
     _torch_ops: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
@@ -59,21 +62,32 @@ class PreparedMesh:
         return self._torch_ops[key]
 
 
-def vertex_features(canonical_vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """v = [position, unit normal] per vertex: (V,3) canonical positions -> (V,6) float32."""
-    normals = vertex_normals(np.asarray(canonical_vertices, np.float64), faces)
+def vertex_features(canonical_vertices: np.ndarray, faces: np.ndarray,
+                    normals: np.ndarray | None = None) -> np.ndarray:
+    """v = [position, unit normal] per vertex: (V,3) canonical positions -> (V,6) float32.
+    ``normals``: their unit vertex normals (V,3) if computed already."""
+    if normals is None:
+        normals = vertex_normals(np.asarray(canonical_vertices, np.float64), faces)
     return np.concatenate([canonical_vertices, normals], axis=1).astype(np.float32)
 
 
-def neutral_channels(frame: np.ndarray, neutral: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def neutral_channels(frame: np.ndarray, neutral: np.ndarray, faces: np.ndarray,
+                     frame_normals: np.ndarray | None = None,
+                     neutral_normals: np.ndarray | None = None) -> np.ndarray:
     """The neutral-aware expression encoder's extra inputs (nets.model.NEUTRAL_CHANNEL_DIM = 7):
     frame (V,3) and its source's neutral (V,3), both in the neutral's canonical frame, faces (F,3)
     -> (V,7) float32 [frame − neutral, normal(frame) − normal(neutral), 0]; the last channel is the
-    "no neutral" flag, 0 here (the model fills 0,..,0,1 itself when no neutral is given)."""
+    "no neutral" flag, 0 here (the model fills 0,..,0,1 itself when no neutral is given).
+    ``frame_normals`` / ``neutral_normals``: their unit vertex normals (V,3) if computed already
+    (a stream of frames reuses the neutral's)."""
     frame, neutral = np.asarray(frame, np.float64), np.asarray(neutral, np.float64)
     if frame.shape != neutral.shape:
         raise ValueError(f"neutral_channels: frame {frame.shape} and neutral {neutral.shape} differ")
-    d_normal = vertex_normals(frame, faces) - vertex_normals(neutral, faces)
+    if frame_normals is None:
+        frame_normals = vertex_normals(frame, faces)
+    if neutral_normals is None:
+        neutral_normals = vertex_normals(neutral, faces)
+    d_normal = frame_normals - neutral_normals
     return np.concatenate([frame - neutral, d_normal, np.zeros((len(frame), 1))], 1).astype(np.float32)
 
 
@@ -95,5 +109,7 @@ def prepare_mesh(vertices: np.ndarray, faces: np.ndarray, k_eig: int, image_size
     cv = canon.to_canonical(vertices).astype(np.float32)
     if ops is None:
         ops = load_or_compute_operators(cv, faces, k_eig, cache_dir=cache_dir)
-    image = render_frontal(cv, faces, image_size, channels=tuple(image_channels), fit=canon.render_fit)
-    return PreparedMesh(canon, cv, faces, vertex_features(cv, faces), ops, image)
+    normals = vertex_normals(cv.astype(np.float64), faces)
+    image = render_frontal(cv, faces, image_size, channels=tuple(image_channels), fit=canon.render_fit,
+                           normals=normals)
+    return PreparedMesh(canon, cv, faces, vertex_features(cv, faces, normals), ops, image, normals)

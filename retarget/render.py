@@ -134,9 +134,10 @@ class Renderer:
         return self.render_modes(verts, faces, (mode,), vertex_colors, view, fit)[0]
 
     def render_modes(self, verts, faces, modes, vertex_colors=None, view: str = "front",
-                     fit=True) -> list[np.ndarray]:
+                     fit=True, normals=None) -> list[np.ndarray]:
         """``[render(verts, faces, mode=m, ...) for m in modes]``, the mesh prepared and uploaded
-        once (the CNN input renders two modes of every frame)."""
+        once (the CNN input renders two modes of every frame). ``normals``: the unit vertex
+        normals (V,3) of ``verts`` if computed already."""
         for mode in modes:
             if mode not in MODES:
                 raise ValueError(f"unknown render mode {mode!r}; choose from {MODES}")
@@ -144,7 +145,8 @@ class Renderer:
         f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         rot = view_rotation(view)
         cam = v @ rot.T
-        normals = vertex_normals(v, f) @ rot.T
+        normals = (vertex_normals(v, f) if normals is None
+                   else np.asarray(normals, np.float64).reshape(-1, 3)) @ rot.T
         if fit is not False:
             if fit is True:
                 lo, hi = cam.min(axis=0), cam.max(axis=0)
@@ -200,16 +202,17 @@ def _renderer(size: int) -> Renderer:
 
 
 def render_frontal(verts, faces, size: int = 256, channels=("shaded", "depth"),
-                   fit=True) -> np.ndarray:
+                   fit=True, normals=None) -> np.ndarray:
     """The CNN input image: a front view framing the mesh's bounding box (``fit=True``), or a fixed
     box ``fit`` = [min, max] (2,3) in the vertices' frame (the face frame's
     ``Canonicaliser.render_fit``, so the image follows the face whatever the crop).
 
     verts (V,3), faces (F,3). channels: any of "shaded" (1 channel, grey), "depth" (1) and "normals"
     (3), stacked in the given order. Returns (C,H,W) float32 in [0,1]; with ``fit=True`` invariant
-    to the mesh's scale and translation.
+    to the mesh's scale and translation. ``normals``: the unit vertex normals (V,3) of ``verts``
+    if computed already.
     """
-    images = _renderer(size).render_modes(verts, faces, tuple(channels), fit=fit)
+    images = _renderer(size).render_modes(verts, faces, tuple(channels), fit=fit, normals=normals)
     planes = [img[..., :1] if ch == "shaded" else img for ch, img in zip(channels, images)]
     return np.ascontiguousarray(np.concatenate(planes, axis=-1).transpose(2, 0, 1))
 

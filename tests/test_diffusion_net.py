@@ -4,7 +4,7 @@ import pytest
 import torch
 import trimesh
 
-from nets.diffusion_net import DiffusionNet, gradient_features, spectral_diffusion
+from nets.diffusion_net import DiffusionNet, gradient_features, spectral_diffusion, tanh
 from nets.geometry import compute_operators
 
 
@@ -126,3 +126,11 @@ def test_sparse_matmul_with_a_given_transpose_matches_the_dense_product_and_its_
     a, a_t = dense.to_sparse_csr(), dense.T.contiguous().to_sparse_csr()
     torch.testing.assert_close(sparse_matmul(a, a_t, x), dense @ x)
     assert torch.autograd.gradcheck(lambda v: sparse_matmul(a, a_t, v), (x,))
+
+
+def test_tanh_through_the_sigmoid_matches_torch_tanh_and_its_gradient():
+    x = torch.linspace(-30.0, 30.0, 20001, dtype=torch.float32, requires_grad=True)
+    y = tanh(x)
+    torch.testing.assert_close(y, torch.tanh(x), atol=3e-7, rtol=0)
+    (g,) = torch.autograd.grad(y.sum(), x)
+    torch.testing.assert_close(g, 1.0 - torch.tanh(x.detach()) ** 2, atol=1e-6, rtol=0)

@@ -76,6 +76,40 @@ def test_old_configs_load_with_the_switch_off_and_ignore_the_neutral():
     assert on.expression_encoder.first.in_features == 6 + cfg.image_code_dim + NEUTRAL_CHANNEL_DIM
 
 
+def test_given_normals_give_the_same_channels_render_and_features(rig, weights):
+    from nets.geometry import vertex_normals
+    from retarget.prepare import prepare_mesh
+    from retarget.render import render_frontal
+
+    frame = rig.evaluate(weights[1]).astype(np.float64)
+    n_frame, n_neutral = vertex_normals(frame, rig.faces), vertex_normals(rig.neutral.astype(np.float64), rig.faces)
+    np.testing.assert_array_equal(neutral_channels(frame, rig.neutral, rig.faces, n_frame, n_neutral),
+                                  neutral_channels(frame, rig.neutral, rig.faces))
+    cv = frame.astype(np.float32)
+    np.testing.assert_array_equal(vertex_features(cv, rig.faces, vertex_normals(cv.astype(np.float64), rig.faces)),
+                                  vertex_features(cv, rig.faces))
+    np.testing.assert_array_equal(render_frontal(cv, rig.faces, 32, normals=vertex_normals(cv.astype(np.float64), rig.faces)),
+                                  render_frontal(cv, rig.faces, 32))
+    p = prepare_mesh(frame, rig.faces, 16, 32, ("shaded", "depth"))
+    np.testing.assert_array_equal(p.normals, vertex_normals(p.vertices.astype(np.float64), rig.faces))
+    np.testing.assert_array_equal(p.feat[:, 3:], p.normals.astype(np.float32))
+
+
+def test_the_neutral_reference_is_made_once_per_source_neutral(r, rig, weights):
+    frames = [Mesh(f, rig.faces) for f in rig.evaluate(weights)]
+    neutral = Mesh(rig.neutral, rig.faces)
+    r.clear_source_cache()
+    z_batch = r.encode(frames, source_neutral=neutral)
+    (src,) = r._sources.values()
+    base = src.neutral[0]
+    z_stream = np.stack([r.encode(f, source_neutral=neutral) for f in frames])
+    assert len(r._sources) == 1 and src.neutral[0] is base       # reused, not remade
+    np.testing.assert_allclose(z_stream, z_batch, atol=1e-6)
+    other = Mesh(rig.neutral * 1.1, rig.faces)                    # another performer: its own entry
+    r.encode(frames[0], source_neutral=other)
+    assert len(r._sources) == 2
+
+
 def test_codes_change_with_the_neutral(r, rig, weights):
     frames = [Mesh(f, rig.faces) for f in rig.evaluate(weights)]
     neutral = Mesh(rig.neutral, rig.faces)
