@@ -22,6 +22,9 @@ from .io import atomic_output
 from .mesh import vertex_normals
 
 MODES = ("shaded", "normals", "depth", "colors")
+#: The shader's mode index that draws "shaded" (red) and "depth" (green) in one pass: the CNN
+#: input's two channels from one render and one read-back (the depth test picks the same fragment).
+_SHADED_DEPTH = len(MODES)
 VIEWS = {"front": 0.0, "three_quarter": -45.0, "side": -90.0}  # rotation about +y, degrees
 MARGIN = 0.05  # fraction of the half image left free on each side of the framed box
 
@@ -53,7 +56,8 @@ void main() {
     if (mode == 0)      rgb = vec3(0.15 + 0.85 * lambert);
     else if (mode == 1) rgb = 0.5 * (n + 1.0);
     else if (mode == 2) rgb = vec3(1.0 - gl_FragCoord.z);   // near = bright
-    else                rgb = v_color * (0.3 + 0.7 * lambert);
+    else if (mode == 3) rgb = v_color * (0.3 + 0.7 * lambert);
+    else                rgb = vec3(0.15 + 0.85 * lambert, 1.0 - gl_FragCoord.z, 0.0);
     f_color = vec4(rgb, 1.0);
 }
 """
@@ -176,19 +180,30 @@ class Renderer:
             self._fbo.use()
             ctx.enable(ctx.DEPTH_TEST)
             ctx.disable(ctx.CULL_FACE)
+            if len(modes) > 1 and set(modes) <= {"shaded", "depth"}:
+                img = self._draw(vao, _SHADED_DEPTH)
+                planes = {"shaded": np.repeat(img[..., :1], 3, axis=-1), "depth": img[..., 1:2]}
+                return [np.ascontiguousarray(planes[m]) for m in modes]
             for mode in modes:
-                ctx.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-                self._program["mode"].value = MODES.index(mode)
-                vao.render()
-                raw = self._fbo.read(components=4, dtype="f4")
-                img = np.frombuffer(raw, dtype=np.float32).reshape(self.size, self.size, 4)[::-1]
-                img = np.clip(img[..., :1] if mode == "depth" else img[..., :3], 0.0, 1.0)
-                images.append(np.ascontiguousarray(img))
+                img = self._draw(vao, MODES.index(mode))
+                images.append(np.ascontiguousarray(img[..., :1] if mode == "depth" else img[..., :3]))
         finally:
             vao.release()
             vbo.release()
             ibo.release()
         return images
+
+
+    def _draw(self, vao, mode_index: int) -> np.ndarray:
+        """Clear, draw ``vao`` in shader mode ``mode_index``, read back: (H,W,4) float32 in [0,1],
+        row 0 at the top."""
+        ctx = self._ctx
+        ctx.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        self._program["mode"].value = mode_index
+        vao.render()
+        raw = self._fbo.read(components=4, dtype="f4")
+        return np.clip(np.frombuffer(raw, dtype=np.float32).reshape(self.size, self.size, 4)[::-1],
+                       0.0, 1.0)
 
 
 _RENDERERS: dict = {}

@@ -129,6 +129,17 @@ def test_render_modes_equals_one_render_per_mode(renderer, blob):
         np.testing.assert_array_equal(img, renderer.render(v, f, mode=mode, view="three_quarter"))
     x = render_frontal(v, f, 48, channels=("shaded", "depth"))
     np.testing.assert_array_equal(x[1], render_frontal(v, f, 48, channels=("depth",))[0])
+    np.testing.assert_array_equal(x[0], render_frontal(v, f, 48, channels=("shaded",))[0])
+
+
+@pytest.mark.parametrize("modes", [("shaded", "depth"), ("depth", "shaded"), ("depth", "depth")])
+def test_shaded_and_depth_in_one_pass_equal_their_own_renders(renderer, blob, modes):
+    v, f = blob
+    images = renderer.render_modes(v, f, modes)
+    assert len(images) == len(modes)
+    for img, mode in zip(images, modes):
+        assert img.shape == (SIZE, SIZE, 1 if mode == "depth" else 3)
+        np.testing.assert_array_equal(img, renderer.render(v, f, mode=mode))
 
 
 def test_unknown_mode_and_missing_colors(renderer, blob):
