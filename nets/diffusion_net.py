@@ -145,11 +145,27 @@ class DiffusionNet(nn.Module):
         self.blocks = nn.ModuleList(DiffusionNetBlock(width, dropout) for _ in range(n_blocks))
         self.last = nn.Linear(width, c_out)
 
-    def forward(self, x: torch.Tensor, ops: TorchOperators) -> torch.Tensor:
-        """x (V, c_in) on the operators' device and dtype -> (V, c_out) or (c_out,)."""
+    def forward(self, x: torch.Tensor, ops: TorchOperators, constant: torch.Tensor | None = None,
+                constant_at: int = 0) -> torch.Tensor:
+        """x (V, c_in) on the operators' device and dtype -> (V, c_out) or (c_out,).
+
+        ``constant`` (k,): input columns that are the same at every vertex (e.g. an image code),
+        left out of x (then (V, c_in − k)); in the full input they are columns
+        [constant_at, constant_at + k). The result is that of the full input, but the first layer
+        multiplies only the per-vertex columns (the image code is 128 of the expression encoder's
+        141 inputs)."""
         if x.shape[0] != ops.n_vertices:
             raise ValueError(f"DiffusionNet: {x.shape[0]} feature rows for a mesh of {ops.n_vertices} vertices")
-        h = self.first(x)
+        if constant is None:
+            h = self.first(x)
+        else:
+            w, k = self.first.weight, constant.shape[0]
+            if x.shape[1] + k != self.first.in_features:
+                raise ValueError(f"DiffusionNet: {x.shape[1]} + {k} input columns for a first layer "
+                                 f"of {self.first.in_features}")
+            bias = torch.addmv(self.first.bias, w[:, constant_at:constant_at + k], constant)
+            w_vertex = torch.cat([w[:, :constant_at], w[:, constant_at + k:]], dim=1)
+            h = torch.addmm(bias, x, w_vertex.T)
         for block in self.blocks:
             h = block(h, ops)
         y = self.last(h)

@@ -296,13 +296,18 @@ class NFSModel(nn.Module):
         """Frontal renders (B, C, H, W) float32 in [0, 1] -> image codes c (B, image_code_dim)."""
         return self.cnn(img)
 
-    def _encoder_input(self, feat: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
-        """[v, c] per vertex: feat (V, 6), c (image_code_dim,) -> (V, 6 + image_code_dim)."""
+    def _encode(self, net: DiffusionNet, x: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
+        """An encoder on the input [v, c, (neutral channels)] per vertex: x the per-vertex columns
+        (V, 6 [+ NEUTRAL_CHANNEL_DIM]), c (image_code_dim,) the same at every vertex, after v."""
+        self._check_image_code(c)
+        return net(x, ops, constant=c, constant_at=VERTEX_FEATURE_DIM)
+
+    @staticmethod
+    def _check_features(feat: torch.Tensor) -> None:
+        """ValueError unless feat is (V, 6)."""
         if feat.dim() != 2 or feat.shape[1] != VERTEX_FEATURE_DIM:
             raise ValueError(f"vertex features must be (V, {VERTEX_FEATURE_DIM}); got "
                              f"{tuple(feat.shape)}")
-        self._check_image_code(c)
-        return torch.cat([feat, c.expand(feat.shape[0], -1)], dim=1)
 
     def _check_image_code(self, c: torch.Tensor) -> None:
         """ValueError unless c is one image code (image_code_dim,)."""
@@ -312,7 +317,8 @@ class NFSModel(nn.Module):
 
     def encode_identity(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
         """Identity encoder on a neutral mesh -> z_ID (code_dim,) (area-weighted vertex mean)."""
-        return self.identity_encoder(self._encoder_input(feat, c), ops)
+        self._check_features(feat)
+        return self._encode(self.identity_encoder, feat, c, ops)
 
     def encode_expression(self, feat: torch.Tensor, c: torch.Tensor, ops,
                           neutral: torch.Tensor | None = None) -> torch.Tensor:
@@ -323,14 +329,15 @@ class NFSModel(nn.Module):
         source's neutral (``retarget.prepare.neutral_channels``), or None when it is unknown; used
         only by a model with ``cfg.neutral_channels`` (ignored otherwise).
         """
-        return self.expression_encoder(self.expression_input(feat, c, neutral), ops)
+        return self._encode(self.expression_encoder, self.expression_input(feat, neutral), c, ops)
 
-    def expression_input(self, feat: torch.Tensor, c: torch.Tensor,
-                         neutral: torch.Tensor | None = None) -> torch.Tensor:
-        """The expression encoder's per-vertex input: [v, c] (V, 6 + image_code_dim), and with
-        ``cfg.neutral_channels`` the neutral channels after them (zeros and flag 1 when ``neutral``
-        is None) -> (V, 6 + image_code_dim + NEUTRAL_CHANNEL_DIM)."""
-        x = self._encoder_input(feat, c)
+    def expression_input(self, feat: torch.Tensor, neutral: torch.Tensor | None = None) -> torch.Tensor:
+        """The per-vertex columns of the expression encoder's input [v, c, neutral channels] (the
+        image code c is the same at every vertex and enters the first layer once): v (V, 6), and
+        with ``cfg.neutral_channels`` the neutral channels after it (zeros and flag 1 when
+        ``neutral`` is None) -> (V, 6 [+ NEUTRAL_CHANNEL_DIM])."""
+        self._check_features(feat)
+        x = feat
         if not self.cfg.neutral_channels:
             return x
         if neutral is None:
@@ -344,7 +351,8 @@ class NFSModel(nn.Module):
     def encode_skinning(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
         """Skinning encoder on a neutral mesh -> z_Skin (V, L) in (0, 1) (sigmoid, for eq. 2 BCE)."""
         self._require_skinning()
-        return self.skinning_encoder(self._encoder_input(feat, c), ops)
+        self._check_features(feat)
+        return self._encode(self.skinning_encoder, feat, c, ops)
 
     def skinning_weights(self, z_skin: torch.Tensor) -> torch.Tensor:
         """Skinning block MLP: z_Skin (V, L) -> ω_Skin (V, code_dim) (no output activation)."""

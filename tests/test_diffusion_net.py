@@ -134,3 +134,20 @@ def test_tanh_through_the_sigmoid_matches_torch_tanh_and_its_gradient():
     torch.testing.assert_close(y, torch.tanh(x), atol=3e-7, rtol=0)
     (g,) = torch.autograd.grad(y.sum(), x)
     torch.testing.assert_close(g, 1.0 - torch.tanh(x.detach()) ** 2, atol=1e-6, rtol=0)
+
+
+def test_constant_columns_give_the_result_of_the_full_input_and_its_gradients(spheres):
+    x, ops = spheres[0]
+    torch.manual_seed(0)
+    net = DiffusionNet(6 + 5 + 2, 8, width=16, n_blocks=2, outputs="global_mean")
+    code = torch.randn(5, requires_grad=True)
+    extra = torch.randn(x.shape[0], 2)
+    full = net(torch.cat([x, code.expand(x.shape[0], -1), extra], 1), ops)
+    split = net(torch.cat([x, extra], 1), ops, constant=code, constant_at=6)
+    torch.testing.assert_close(split, full, atol=1e-5, rtol=1e-5)
+    g_full = torch.autograd.grad(full.sum(), [code, net.first.weight, net.first.bias])
+    g_split = torch.autograd.grad(split.sum(), [code, net.first.weight, net.first.bias])
+    for a, b in zip(g_split, g_full):
+        torch.testing.assert_close(a, b, atol=1e-4, rtol=1e-4)
+    with pytest.raises(ValueError, match="input columns"):
+        net(x, ops, constant=code, constant_at=6)

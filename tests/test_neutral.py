@@ -50,18 +50,19 @@ def test_channels_are_zero_and_flag_without_a_neutral_and_the_displacement_with_
     frame = rig.evaluate(weights[0]).astype(np.float64)
     feat = torch.from_numpy(vertex_features(frame.astype(np.float32), rig.faces))
     c = torch.zeros(model.cfg.image_code_dim)
-    x = model.expression_input(feat, c, None)
-    assert x.shape == (len(frame), 6 + model.cfg.image_code_dim + NEUTRAL_CHANNEL_DIM)
+    x = model.expression_input(feat, None)
+    assert x.shape == (len(frame), 6 + NEUTRAL_CHANNEL_DIM)
+    assert model.expression_encoder.first.in_features == 6 + model.cfg.image_code_dim + NEUTRAL_CHANNEL_DIM
     assert torch.all(x[:, -NEUTRAL_CHANNEL_DIM:-1] == 0) and torch.all(x[:, -1] == 1)
     ch = neutral_channels(frame, rig.neutral, rig.faces)
     assert ch.shape == (len(frame), NEUTRAL_CHANNEL_DIM) and np.all(ch[:, -1] == 0)
     np.testing.assert_allclose(ch[:, :3], frame - rig.neutral, atol=1e-5)
     assert np.abs(ch[:, 3:6]).max() > 1e-3                       # the expression turns normals
     assert np.abs(neutral_channels(rig.neutral, rig.neutral, rig.faces)).max() == 0
-    x = model.expression_input(feat, c, torch.from_numpy(ch))
+    x = model.expression_input(feat, torch.from_numpy(ch))
     assert torch.equal(x[:, -NEUTRAL_CHANNEL_DIM:], torch.from_numpy(ch))
     with pytest.raises(ValueError, match="neutral channels must be"):
-        model.expression_input(feat, c, torch.from_numpy(ch[:-1]))
+        model.expression_input(feat, torch.from_numpy(ch[:-1]))
 
 
 def test_old_configs_load_with_the_switch_off_and_ignore_the_neutral():
