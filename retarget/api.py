@@ -159,6 +159,26 @@ def basis_shapes(target: "Target", dims: slice) -> np.ndarray:
     return np.ascontiguousarray(target.proxy.canon.displacement_from_canonical(shapes), np.float32)
 
 
+_BLAS_POOLS = None   # threadpoolctl's view of the BLAS libraries numpy and scipy load (lazily)
+
+
+def one_blas_thread():
+    """A context in which the BLAS of numpy and scipy runs on one thread, for small per-frame
+    linear algebra between torch calls (``Retargeter.refine``). On CPU, OpenBLAS's worker threads
+    keep spinning for a while after a multi-threaded call and then compete for the cores with
+    torch's OpenMP threads: one frame of ``invert --refine`` took 125 ms instead of 46 ms
+    (``retarget bench --sections frames``, 2 threads). The libraries are listed once (listing costs
+    ~2 ms, the limit itself microseconds)."""
+    global _BLAS_POOLS
+    if _BLAS_POOLS is None:
+        import scipy.linalg  # noqa: F401  (scipy's own BLAS is listed only once loaded)
+        import scipy.optimize  # noqa: F401
+        from threadpoolctl import ThreadpoolController
+
+        _BLAS_POOLS = ThreadpoolController()
+    return _BLAS_POOLS.limit(limits=1, user_api="blas")
+
+
 def _ridge(gram: np.ndarray, prior: float) -> float:
     """λ = ``prior`` · mean diag(AᵀA) for the Gram matrix AᵀA (K,K) of a linear model."""
     return prior * float(np.trace(gram)) / len(gram) + 1e-12
@@ -504,13 +524,15 @@ class Retargeter:
         out = np.zeros_like(z)
         for i, frame in enumerate(frames):
             w0 = np.clip(z[i, :N_FACS], 0.0, 1.0)
-            if joint:
-                out[i, :N_FACS], out[i, N_FACS:] = rig.fit_joint(frame.vertices, w0, prior, sparsity)
-                continue
-            out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity)
-            if rig.free_basis is not None:
-                out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
-            elif self.refine_steps > 0:
+            with one_blas_thread():
+                if joint:
+                    out[i, :N_FACS], out[i, N_FACS:] = rig.fit_joint(frame.vertices, w0, prior,
+                                                                     sparsity)
+                    continue
+                out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity)
+                if rig.free_basis is not None:
+                    out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
+            if rig.free_basis is None and self.refine_steps > 0:
                 out[i, N_FACS:] = self._refine_free_dims(rig, frame.vertices, out[i, :N_FACS])
         return out.reshape(np.shape(z_ge))
 

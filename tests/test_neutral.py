@@ -233,6 +233,26 @@ def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
     np.testing.assert_array_equal(one, z[0])
 
 
+def test_refine_fits_on_one_blas_thread(r, rig, weights, monkeypatch):
+    # OpenBLAS threads left spinning after a fit slow the next frame's torch encoder ~2.5x
+    from threadpoolctl import threadpool_info
+
+    def blas_threads():
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+    before, seen = blas_threads(), []
+    for name in ("fit", "fit_joint"):
+        def spy(self, *args, _orig=getattr(SourceRig, name), **kwargs):
+            seen.append(blas_threads())
+            return _orig(self, *args, **kwargs)
+        monkeypatch.setattr(SourceRig, name, spy)
+    neutral = Mesh(rig.neutral, rig.faces)
+    frames = [Mesh(f, rig.faces) for f in r.source_rig(neutral).baked.evaluate(weights)]
+    r.invert(frames, source_neutral=neutral, refine=True)
+    assert len(seen) == len(frames) and all(threads and set(threads) == {1} for threads in seen)
+    assert blas_threads() == before                                  # restored afterwards
+
+
 def test_refine_steps_fit_the_free_dims(rig, weights):
     torch.manual_seed(0)
     model = NFSModel(NFSConfig.preset("tiny", neutral_channels=True))
