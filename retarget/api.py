@@ -326,6 +326,9 @@ class Retargeter:
     REFINE_JOINT_INVERT = False
     SOURCE_RIGS_KEPT = 8
     REFINE_ROWS = 2000
+    #: ``estimate_neutral``: frames of a take used at most (evenly spaced; memory of the estimate:
+    #: this many frames × 12 bytes a vertex)
+    ESTIMATE_FRAMES = 32
 
     def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
@@ -535,6 +538,30 @@ class Retargeter:
             if rig.free_basis is None and self.refine_steps > 0:
                 out[i, N_FACS:] = self._refine_free_dims(rig, frame.vertices, out[i, :N_FACS])
         return out.reshape(np.shape(z_ge))
+
+    def estimate_neutral(self, frames, max_frames: int | None = None) -> Mesh:
+        """The performer's neutral estimated from a take alone, for a source without its neutral
+        mesh (``--estimate-neutral``; beyond the paper): each frame f_t is encoded without a
+        neutral (z_t), the codes are decoded on the first frame taken as the identity, and the
+        neutral is the per-coordinate median over the frames of f_t − D(f_1, z_t). Each frame's
+        reading is off by the no-neutral error, but the errors of different expressions largely
+        cancel in the median, so the estimate can then serve as ``source_neutral``, with
+        ``refine`` (docs/RESULTS.md, "A neutral estimated from the take"). A take of one frame gives
+        that frame's own reading back; the more varied the take, the better the estimate.
+
+        frames: a Mesh or a list of frames sharing a topology (at most ``max_frames``, default
+        ``ESTIMATE_FRAMES``, evenly spaced, are used) -> a Mesh of their topology, in their frame
+        and units."""
+        frames, _ = source_frames(frames)
+        n = min(len(frames), int(max_frames or self.ESTIMATE_FRAMES))
+        picked = [frames[i] for i in np.unique(np.linspace(0, len(frames) - 1, n).round().astype(int))]
+        z = np.asarray(self.encode(picked)).reshape(len(picked), -1)
+        first = picked[0]
+        identity = self.prepare(Mesh(first.vertices, first.faces, first.name))
+        readings = np.empty((len(picked),) + first.vertices.shape, np.float32)
+        for i, (frame, decoded) in enumerate(zip(picked, self.iter_decode(identity, z))):
+            readings[i] = frame.vertices - (decoded - first.vertices)   # f_t − D(f_1, z_t)
+        return Mesh(np.median(readings, axis=0).astype(np.float64), first.faces, "estimated neutral")
 
     def _refine_free_dims(self, rig: SourceRig, frame: np.ndarray, w: np.ndarray) -> np.ndarray:
         """The free dims f of z_GE = [w, f] (f from 0) after ``refine_steps`` Adam steps on the

@@ -287,6 +287,8 @@ def bench_network(r, target, frames, source_neutral, weights, repeats: int) -> d
         out["invert_refine"][f"added_ms_{REFINE_STEPS}_steps"] = 1000 * latency(
             lambda i: r.refine(frames[i], source_neutral, codes[i]), list(range(len(frames))))
         r.refine_steps = steps
+    # a take without its neutral: the neutral estimated from the frames (once per take)
+    out["estimate_neutral_s"], _ = median_time(lambda: r.estimate_neutral(frames), 1)
     bake_s, _ = median_time(lambda: r.bake(target), 1)
     baked = r.bake(target)
     out["baked"] = {**_rate(baked.evaluate, lambda: baked.evaluate(weights), w_list, repeats),
@@ -494,6 +496,10 @@ def to_markdown(results: dict) -> str:
                           if fr["decoder"] == "basis" else
                           f"), {fmt(ref.get(f'added_ms_{REFINE_STEPS}_steps'))} ms with "
                           f"{REFINE_STEPS} gradient steps on the free dims.") + "\n")
+        if "estimate_neutral_s" in fr["model"]:
+            out.append(f"A take without its neutral (`--estimate-neutral`): estimating the neutral "
+                       f"from the {fr['frames']} frames takes {fmt(fr['model']['estimate_neutral_s'])} s "
+                       f"once, then the frames cost what invert_refine's do.\n")
         missed = {t["target"] for t in results.get("targets", []) if t["device"] == device and not t["met"]}
         for op in [op for op in ("transfer", "animate", "invert")
                    if {f"{op}_fps", f"{op}_call_fps"} & missed]:

@@ -101,8 +101,13 @@ CLOSEST_POINT_NAME = "closest point"
 BASELINES_FIRST, BASELINES_LAST = (DO_NOTHING_NAME,), (CLOSEST_POINT_NAME, ORACLE_NAME)
 #: How a checkpoint is given the source (``retarget eval --neutral-modes``): without its neutral
 #: (frames canonicalised on the first), with it (the default: canonical frame, operators and, for a
-#: neutral-aware model, the encoder's neutral channels), and with it plus analysis-by-synthesis.
-NEUTRAL_MODES = {"none": "no neutral", "neutral": "neutral", "refine": "neutral + refine"}
+#: neutral-aware model, the encoder's neutral channels), with it plus analysis-by-synthesis, and
+#: without it but with one estimated from the case's own frames, then analysis-by-synthesis on that
+#: (``Retargeter.estimate_neutral``: what ``--estimate-neutral --refine`` gives a user).
+NEUTRAL_MODES = {"none": "no neutral", "neutral": "neutral", "refine": "neutral + refine",
+                 "estimate": "estimated neutral + refine"}
+#: The modes that fit the frames on the source's rig (``Retargeter.refine``).
+REFINE_MODES = ("refine", "estimate")
 
 
 # ------------------------------------------------------------------------------------- config
@@ -426,15 +431,20 @@ class NetworkMethod:
 
     def _source(self, case: Case) -> tuple[list[Mesh], Mesh | None]:
         """(source frames, source neutral) as meshes; frames are encoded in the neutral's frame
-        and with its operators (``Retargeter.encode``); no neutral in mode "none"."""
-        return ([Mesh(f, case.source.faces) for f in case.source_frames],
-                None if self.mode == "none" else Mesh(case.source.neutral, case.source.faces))
+        and with its operators (``Retargeter.encode``); no neutral in mode "none", the one
+        estimated from the frames in mode "estimate"."""
+        frames = [Mesh(f, case.source.faces) for f in case.source_frames]
+        if self.mode == "none":
+            return frames, None
+        if self.mode == "estimate":
+            return frames, self.r.estimate_neutral(frames)
+        return frames, Mesh(case.source.neutral, case.source.faces)
 
     def transfer(self, case: Case, filters=(None,), fps: float = 30.0) -> dict:
         """{filter: (T,Vt,3) cm prediction} for each temporal filter (None = raw codes); the
         frames are encoded once and decoded once per filter (= ``Retargeter.transfer(smooth=f)``)."""
         frames, neutral = self._source(case)
-        z = self.r.expression_codes(frames, source_neutral=neutral, refine=self.mode == "refine")
+        z = self.r.expression_codes(frames, source_neutral=neutral, refine=self.mode in REFINE_MODES)
         target = self._target(case.target)
         return {f: self.r.decode(target, z if f is None else smooth_codes(z, f, fps)) for f in filters}
 
@@ -447,7 +457,7 @@ class NetworkMethod:
     def invert(self, case: Case) -> np.ndarray:
         """(T,53) ICT weights in [0,1] predicted from the source frames."""
         frames, neutral = self._source(case)
-        return self.r.invert(frames, source_neutral=neutral, refine=self.mode == "refine")
+        return self.r.invert(frames, source_neutral=neutral, refine=self.mode in REFINE_MODES)
 
 
 class DoNothingMethod:

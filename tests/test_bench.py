@@ -83,6 +83,7 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
     assert fr["model"]["invert_refine"]["source_bake_s"] > 0
     assert fr["model"]["invert_refine"]["added_ms_10_steps"] > 0 and fr["model"]["invert_refine"]["added_ms"] > 0
     assert fr["model"]["invert_refine"]["added_invert_ms"] > 0
+    assert fr["model"]["estimate_neutral_s"] > 0
     assert res["train"]["samples_per_s"] > 0 and res["train"]["steps_timed"] == 2
     without = {w["trick"]: w["samples_per_s"] for w in res["train"]["without"]}
     assert len(without) == 3 and all(v > 0 for v in without.values())
@@ -91,6 +92,7 @@ def test_bench_command_on_a_tiny_checkpoint(tmp_path):
     assert "| per call frames/s | batched frames/s |" in md
     assert "| basis |" in md and "baked vs decoder (mm²)" in md
     assert "| invert_refine |" in md and "refine adds" in md
+    assert "estimating the neutral from the 3 frames takes" in md
     assert "measured by undoing it" in md and "| target encoded once for S sources |" in md
     assert to_markdown(res) in md
 

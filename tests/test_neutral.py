@@ -253,6 +253,23 @@ def test_refine_fits_on_one_blas_thread(r, rig, weights, monkeypatch):
     assert blas_threads() == before                                  # restored afterwards
 
 
+def test_estimate_neutral_is_the_median_of_the_frames_readings(r, rig, weights):
+    frames = [Mesh(f, rig.faces) for f in rig.evaluate(weights)]
+    est = r.estimate_neutral(frames)
+    assert est.vertices.shape == rig.neutral.shape and np.array_equal(est.faces, rig.faces)
+    # each frame minus its code decoded on the first frame as the identity; the median of those
+    decoded = r.decode(r.prepare(frames[0]), r.encode(frames))
+    readings = np.stack([f.vertices for f in frames]) - (decoded - frames[0].vertices)
+    np.testing.assert_allclose(est.vertices, np.median(readings, 0), atol=1e-4)
+    assert np.abs(est.vertices - frames[0].vertices).max() > 1e-4   # not a frame given back
+    # at most max_frames of the take, evenly spaced: here the first and the last
+    np.testing.assert_array_equal(r.estimate_neutral(frames, max_frames=2).vertices,
+                                  r.estimate_neutral([frames[0], frames[2]]).vertices)
+    # in the frames' own frame and units: millimetres, shifted, give the same neutral
+    mm = r.estimate_neutral([Mesh(f.vertices * 10 + [5.0, -3.0, 2.0], f.faces) for f in frames])
+    np.testing.assert_allclose(mm.vertices, est.vertices * 10 + [5.0, -3.0, 2.0], atol=1e-3)
+
+
 def test_refine_steps_fit_the_free_dims(rig, weights):
     torch.manual_seed(0)
     model = NFSModel(NFSConfig.preset("tiny", neutral_channels=True))
@@ -370,6 +387,21 @@ def test_invert_and_transfer_refine_on_the_command_line(files, tmp_path):
     assert (tmp_path / "t.obj").stat().st_size > 0
 
 
+def test_estimate_neutral_on_the_command_line(files, tmp_path, capsys):
+    for command in (["invert", files / "seq", "-o", tmp_path / "w.csv"],
+                    ["transfer", files / "seq", files / "neutral.obj", "-o", tmp_path / "out"]):
+        capsys.readouterr()
+        assert _cli(files, *command, "--estimate-neutral", "--refine") == 0
+        out, err = capsys.readouterr()
+        assert "estimated the source neutral from 3 of 3 frame(s)" in out
+        assert "note:" not in err
+    assert len(list((tmp_path / "out").glob("*.obj"))) == 3
+    capsys.readouterr()                               # one frame: said, then done as asked
+    assert _cli(files, "invert", files / "seq" / "frame_0.obj", "-o", tmp_path / "one.csv",
+                "--estimate-neutral", "--refine") == 0
+    assert "a take of varied expressions is needed" in capsys.readouterr().err
+
+
 def test_transfer_and_invert_advise_the_neutral_and_refine(files, tmp_path, capsys):
     seq, neutral = files / "seq", files / "neutral.obj"
     for extra, fragment in (([], "no --source-neutral"),
@@ -387,6 +419,7 @@ def test_transfer_and_invert_advise_the_neutral_and_refine(files, tmp_path, caps
 
 @pytest.mark.parametrize("argv,fragment", [
     (["--refine"], "--refine needs --source-neutral"),
+    (["--source-neutral", "NEUTRAL", "--estimate-neutral"], "either --source-neutral or --estimate-neutral"),
     (["--source-neutral", "NEUTRAL_OTHER"], "has 303 vertices, but the frames have 415"),
     (["--source-neutral", "NEUTRAL_OTHER", "--refine"], "has 303 vertices, but the frames have 415"),
     (["--source-neutral", "NEUTRAL", "--refine", "--refine-steps", "-1"], "--refine-steps must be"),
@@ -409,9 +442,9 @@ def test_eval_neutral_modes_make_a_row_each(files, tmp_path):
     out = tmp_path / "eval"
     assert main(["eval", "--config", str(TINY_EVAL), "--checkpoint", f"n={files / 'tiny.pt'}",
                  "--suite", "self", "inverse", "--neutral-modes", "none", "neutral", "refine",
-                 "--no-oracle", "--no-progress", "--out", str(out), "--device", "cpu"]) == 0
+                 "estimate", "--no-oracle", "--no-progress", "--out", str(out), "--device", "cpu"]) == 0
     res = json.loads((out / "eval.json").read_text())
-    rows = {"n (no neutral)", "n (neutral)", "n (neutral + refine)"}
+    rows = {"n (no neutral)", "n (neutral)", "n (neutral + refine)", "n (estimated neutral + refine)"}
     assert set(res["methods"]) == rows | {"do nothing", "closest point"}
     inverse = {k: v for k, v in res["suites"]["inverse"]["methods"].items() if k in rows}
     assert set(inverse) == rows and all(0 <= m["weight_mae"] <= 1 for m in inverse.values())

@@ -30,18 +30,26 @@ def add_neutral_args(p) -> None:
     p.add_argument("--source-neutral", metavar="FILE",
                    help="the performer's neutral mesh (same topology as the frames): the canonical "
                         "frame and operators, and for a neutral-aware model the encoder's input")
+    p.add_argument("--estimate-neutral", action="store_true",
+                   help="without a neutral mesh: estimate the performer's neutral from the frames "
+                        "themselves (a take of varied expressions), then use it as --source-neutral")
     p.add_argument("--refine", action="store_true",
                    help="analysis-by-synthesis: fit the weights to each frame on the decoder's rig "
-                        "baked on the source neutral (bounded least squares; needs --source-neutral)")
+                        "baked on the source neutral (bounded least squares; needs --source-neutral "
+                        "or --estimate-neutral)")
     p.add_argument("--refine-steps", type=int, default=0, metavar="N",
                    help="with --refine and an MLP decoder, then fit the free dims of z_GE by N gradient "
                         "steps (default 0); a basis decoder always solves them exactly")
 
 
 def check_neutral_args(args) -> None:
-    """RetargetError for --refine without --source-neutral or a negative --refine-steps."""
-    if args.refine and not args.source_neutral:
-        raise RetargetError("--refine needs --source-neutral (the source's neutral mesh)")
+    """RetargetError for --refine without a neutral (--source-neutral or --estimate-neutral), for
+    both of those, or a negative --refine-steps."""
+    if args.source_neutral and args.estimate_neutral:
+        raise RetargetError("give either --source-neutral or --estimate-neutral, not both")
+    if args.refine and not (args.source_neutral or args.estimate_neutral):
+        raise RetargetError("--refine needs --source-neutral (the source's neutral mesh) or "
+                            "--estimate-neutral (one estimated from the frames)")
     if args.refine_steps < 0:
         raise RetargetError(f"--refine-steps must be >= 0, got {args.refine_steps}")
 
@@ -51,10 +59,10 @@ def neutral_hint(args) -> str | None:
     ``--source-neutral`` the expression is read from the frames alone; with it but without
     ``--refine`` the frames are not fitted on the source's own rig (docs/RESULTS.md: several
     times the error of both together)."""
-    if not args.source_neutral:
+    if not (args.source_neutral or args.estimate_neutral):
         return ("note: no --source-neutral: the expression is read from the frames alone, several "
-                "times less accurately than with the performer's neutral mesh and --refine "
-                "(docs/RESULTS.md)")
+                "times less accurately than with the performer's neutral mesh and --refine, or, "
+                "for a take without one, --estimate-neutral --refine (docs/RESULTS.md)")
     if not args.refine:
         return ("note: without --refine the frames are not fitted on the network's rig of the "
                 "source neutral; --refine is several times more accurate (docs/RESULTS.md)")
@@ -66,6 +74,21 @@ def print_neutral_hint(args) -> None:
     hint = neutral_hint(args)
     if hint:
         print(hint, file=sys.stderr)
+
+
+def estimated_neutral(args, r, frames, neutral):
+    """The source neutral to use: with ``--estimate-neutral`` the one ``Retargeter.estimate_neutral``
+    makes from ``frames`` (a note on stderr when the take is a single frame: there is nothing to
+    estimate from), else ``neutral`` (that of ``load_source_neutral``)."""
+    if not args.estimate_neutral:
+        return neutral
+    if len(frames) < 2:
+        print("note: --estimate-neutral on a single frame only gives its own reading back; a take "
+              "of varied expressions is needed", file=sys.stderr)
+    neutral = r.estimate_neutral(frames)
+    print(f"estimated the source neutral from {min(len(frames), r.ESTIMATE_FRAMES)} of "
+          f"{len(frames)} frame(s)")
+    return neutral
 
 
 def load_source_neutral(args, frames):

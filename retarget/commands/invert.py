@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 from ._common import (add_model_args, add_neutral_args, add_smooth_arg, check_neutral_args,
-                      load_source_neutral, print_neutral_hint, retargeter)
+                      estimated_neutral, load_source_neutral, print_neutral_hint, retargeter)
 
 HELP = "inverse rigging: FRAMES (a mesh, folder or glob) -> a CSV of 53 named weights per frame"
 EXAMPLE = """retarget invert "capture/*.obj" -o weights.csv
 retarget invert capture/ -o weights_arkit.csv --names arkit --smooth one_euro
-retarget invert capture/ -o weights.csv --source-neutral actor_neutral.obj --refine"""
+retarget invert capture/ -o weights.csv --source-neutral actor_neutral.obj --refine
+retarget invert capture/ -o weights.csv --estimate-neutral --refine"""
 
 
 def add_arguments(p):
@@ -31,8 +32,9 @@ def run(args) -> int:
     frames = load_sequence(args.frames, up=args.up, forward=args.forward, force=args.force)
     neutral = load_source_neutral(args, frames)
     print_neutral_hint(args)
-    w = retargeter(args).invert(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
-                                refine=args.refine)
+    r = retargeter(args)
+    neutral = estimated_neutral(args, r, frames, neutral)
+    w = r.invert(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True, refine=args.refine)
     write_weights_csv(args.out, w.reshape(len(frames), -1), names=args.names, fps=args.fps)
     print(f"wrote {len(frames)} frame(s) of 53 weights to {args.out}")
     return 0

@@ -2,14 +2,15 @@
 from __future__ import annotations
 
 from ._common import (add_model_args, add_neutral_args, add_smooth_arg, check_neutral_args,
-                      load_source_neutral, output_paths, print_neutral_hint, retargeter,
-                      write_frames)
+                      estimated_neutral, load_source_neutral, output_paths, print_neutral_hint,
+                      retargeter, write_frames)
 
 HELP = "clone expression(s) of SRC (a mesh, a folder or a glob of frames) onto the neutral TGT"
 EXAMPLE = """retarget transfer actor/frame_0001.obj character_neutral.obj -o smile.obj
 retarget transfer "capture/*.obj" character_neutral.obj -o out_frames/ --smooth savgol
 retarget transfer capture/ character_neutral.obj -o performance.glb --source-neutral actor_neutral.obj
-retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine"""
+retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine
+retarget transfer capture/ character_neutral.obj -o out/ --estimate-neutral --refine"""
 
 
 def add_arguments(p):
@@ -37,6 +38,7 @@ def run(args) -> int:
     neutral = load_source_neutral(args, frames)
     print_neutral_hint(args)
     r = retargeter(args)
+    neutral = estimated_neutral(args, r, frames, neutral)
     tgt = r.prepare(target)
     z = r.expression_codes(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
                            refine=args.refine)

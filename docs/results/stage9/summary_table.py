@@ -1,6 +1,8 @@
 """The table of docs/RESULTS.md's Summary from two eval.json files of the default eval config:
 the bundled model's (methods "NAME (no neutral)", "(neutral)", "(neutral + refine)") and the
-previous bundled model's, with the do-nothing and closest-point rows. Segment-averaged MSE in mm²
+previous bundled model's, with the do-nothing and closest-point rows; and, where the new eval has
+them, the rows "NAME (estimated neutral + refine)" (a take without its neutral mesh,
+``--estimate-neutral --refine``) as a column after "no neutral". Segment-averaged MSE in mm²
 (the ARKit rig: plain MSE), each with its ratio to doing nothing; inverse suites also the weight MAE.
 
     python docs/results/stage9/summary_table.py NEW_EVAL_JSON NEW_NAME OLD_EVAL_JSON OLD_NAME [OLD_LABEL]
@@ -26,6 +28,7 @@ ROWS = (  # (label, suite, kind)
     ("ARKit rig: unmoved, its neutral onto itself (the floor)", "real_rig", "unmoved"),
 )
 MODES = ("no neutral", "neutral", "neutral + refine")
+ESTIMATE = "estimated neutral + refine"
 
 
 def g(x: float) -> str:
@@ -64,15 +67,18 @@ def main(new_path, new, old_path, old, old_label=None) -> None:
     a = json.loads(open(new_path).read())["suites"]
     b = json.loads(open(old_path).read())["suites"]
     old_label = old_label or old
-    print(f"| suite | do nothing | closest point | bundled, no neutral | bundled, neutral | bundled, "
-          f"neutral + refine | {old_label}, no neutral | {old_label}, neutral + refine |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    modes = list(MODES)
+    if any(f"{new} ({ESTIMATE})" in res.get("methods", {}) for res in a.values()):
+        modes.insert(1, ESTIMATE)
+    print("| suite | do nothing | closest point | " + " | ".join(f"bundled, {m}" for m in modes)
+          + f" | {old_label}, no neutral | {old_label}, neutral + refine |")
+    print("| --- |" + " ---: |" * (len(modes) + 4))
     for label, suite, kind in ROWS:
         nothing = value(a, suite, "do nothing", kind)
         row = [label, (g(nothing[0]) + (f" / {nothing[1]:.4g}" if nothing[1] is not None else ""))
                if nothing else "—", cell(value(a, suite, "closest point", kind), nothing)]
         same = kind in ("animate", "real_animate")   # no source mesh: every mode the same
-        for i, mode in enumerate(MODES):
+        for i, mode in enumerate(modes):
             row.append("(the same)" if same and i else cell(value(a, suite, f"{new} ({mode})", kind), nothing))
         for mode in ("no neutral", "neutral + refine"):
             row.append("(the same)" if same and mode != "no neutral"
