@@ -187,9 +187,10 @@ def test_millimetre_files_give_the_centimetre_result_times_ten(files, tmp_path):
     assert np.allclose(mm, 10 * cm, atol=1e-3)  # float32 PLY: ~1e-6 relative
 
 
-def test_demo_runs_on_a_tiny_checkpoint(files, tmp_path):
+def test_demo_runs_on_a_tiny_checkpoint(files, tmp_path, capsys):
     pytest.importorskip("data_synth.rig")
     assert run("demo", "-o", tmp_path / "demo", "--frames", "2", files=files) == 0
+    assert "without the source's neutral, estimated from the take" in capsys.readouterr().out
     produced = {p.suffix for p in (tmp_path / "demo").rglob("*") if p.is_file()}
     assert {".obj", ".glb", ".png"} <= produced
 

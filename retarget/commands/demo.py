@@ -128,6 +128,9 @@ def run(args) -> int:
     pred = r.transfer(src_frames, target, source_neutral=src_neutral, progress=True, refine=refine)
     gt = tgt_rig.evaluate(weights)
     inverted = r.invert(src_frames, source_neutral=src_neutral, refine=refine)
+    # the same take as if it had come without its neutral mesh: the neutral estimated from it
+    estimated = r.transfer(src_frames, target, source_neutral=r.estimate_neutral(src_frames),
+                           refine=refine)
     rig = r.bake(target)
 
     for t, v in enumerate(pred):
@@ -164,6 +167,9 @@ def run(args) -> int:
           f"{seg0:.3f} mm²{ratios}")
     print(f"  inverse rigging of the source: weight MAE {mae:.3f} (predicting 0: "
           f"{float(np.abs(weights).mean()):.3f})")
+    print(f"  without the source's neutral, estimated from the take (--estimate-neutral"
+          f"{' --refine' if refine else ''}): MSE {mse_mm2(estimated, gt):.3f} mm², "
+          f"segment-averaged {segment_mse_mm2(estimated, gt, tgt_rig.segments, L)[0]:.3f} mm²")
     print(f"wrote {out}/result/ ({args.frames} OBJ frames), {out}/result.glb, {out}/target_rig.glb "
           f"(53 morph targets + inverted animation), {out}/preview.png "
           f"in {time.monotonic() - t0:.0f} s")
