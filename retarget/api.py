@@ -555,9 +555,9 @@ class Retargeter:
         frames, _ = source_frames(frames)
         n = min(len(frames), int(max_frames or self.ESTIMATE_FRAMES))
         picked = [frames[i] for i in np.unique(np.linspace(0, len(frames) - 1, n).round().astype(int))]
-        z = np.asarray(self.encode(picked)).reshape(len(picked), -1)
+        z = self.encode(picked)                                  # (T', 128): a list always
         first = picked[0]
-        identity = self.prepare(Mesh(first.vertices, first.faces, first.name))
+        identity = self.prepare(first)
         readings = np.empty((len(picked),) + first.vertices.shape, np.float32)
         for i, (frame, decoded) in enumerate(zip(picked, self.iter_decode(identity, z))):
             readings[i] = frame.vertices - (decoded - first.vertices)   # f_t − D(f_1, z_t)
