@@ -176,7 +176,8 @@ def blendshape_reconstruction_loss(model, feat: torch.Tensor, c: torch.Tensor, c
 
 
 def rig_loss(model, feat: torch.Tensor, c: torch.Tensor, codes, basis: torch.Tensor,
-             rows: torch.Tensor | None = None, shapes: torch.Tensor | None = None) -> torch.Tensor:
+             rows: torch.Tensor | None = None, shapes: torch.Tensor | None = None,
+             relative: float = 0.0) -> torch.Tensor:
     """L_rig = mean_k ||D(Ψ([e_k, 0], z_Skin)) - B_k||²: the decoder driven by one FACS weight at 1
     and every other dim of z_GE at 0 draws that shape of the target's rig (beyond the paper: L_BR,
     eq. 8, with one-hot codes instead of the encoder's). It makes the first 53 dims of the code
@@ -189,6 +190,10 @@ def rig_loss(model, feat: torch.Tensor, c: torch.Tensor, codes, basis: torch.Ten
         basis: (53, V, 3) blendshape deltas of that mesh, in the units of ``feat``'s positions.
         rows: (n,) int64 vertices to decode, or None for all.
         shapes: (K,) int64 shape indices to decode, or None for all 53.
+        relative: τ > 0 weighs shape k's squared error by m̄ / (m_k + τ m̄), m_k its mean squared
+            displacement and m̄ the mean of m_k over the K shapes (beyond the paper): each shape's
+            error relative to its own size, so the small shapes (eye looks, brows) count as much
+            as jawOpen, up to 1/τ times the weight of an average one. 0: plain squared error.
     Returns:
         Squared distance, mean over the K shapes and the decoded vertices, units².
     """
@@ -197,7 +202,13 @@ def rig_loss(model, feat: torch.Tensor, c: torch.Tensor, codes, basis: torch.Ten
     k = torch.arange(basis.shape[0], device=basis.device) if shapes is None else shapes
     z = weights_to_code(F.one_hot(k, basis.shape[0]).to(basis.dtype), model.cfg.code_dim)
     sub = basis[k] if rows is None else basis[k][:, rows]
-    return vertex_loss(model.decode_target(feat, c, codes, z, rows), sub)
+    pred = model.decode_target(feat, c, codes, z, rows)
+    if relative <= 0.0:
+        return vertex_loss(pred, sub)
+    size = sub.pow(2).sum(-1).mean(-1)                              # m_k (K,)
+    mean = size.mean()
+    err = (pred - sub).pow(2).sum(-1).mean(-1)                      # (K,)
+    return (err * mean / (size + relative * mean + 1e-12)).mean()
 
 
 def segmentation_nll(z_skin: torch.Tensor, labels: torch.Tensor) -> torch.Tensor:

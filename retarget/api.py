@@ -268,29 +268,42 @@ class SourceRig:
         f = solve_triangular(self.free_chol, gf - x @ w.astype(np.float64))
         return w, f.astype(np.float32)
 
-    def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float, sparsity: float = 0.0) -> np.ndarray:
+    def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float, sparsity: float = 0.0,
+            reweight: tuple = ()) -> np.ndarray:
         """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|² + μ Σw, λ =
         prior · mean diag(AᵀA), μ = sparsity · mean diag(AᵀA) (an L1 pull towards 0, which on
         w ≥ 0 is linear): frame (V,3) in the source's units, w0 (53,) the encoder's estimate. Bounded
         least squares (``scipy.optimize.lsq_linear``, BVLS) on the 53×53 reduced system
         R w ≈ R⁻ᵀ (Aᵀb + λ w0), which has the same minimiser as the full (3V+53)-row problem; the
         problem is convex, so the estimate enters as the prior, not as a starting point. When the
-        unconstrained minimiser lies in [0,1] it is the answer and BVLS is skipped."""
+        unconstrained minimiser lies in [0,1] it is the answer and BVLS is skipped.
+
+        reweight: (μ_max, ε, passes) for reweighted L1 (Candès, Wakin and Boyd 2008): after the
+        fit above, ``passes`` more fits with a pull of μ_max · ε / (w_k + ε) on each weight, w the
+        previous pass's: weights the frame needs are barely pulled, the small ones a fit spreads
+        over many shapes are pulled hard towards 0. () = off."""
         if prior not in self.factors:
             self.factors[prior] = _ridge_factor(self.gram, prior)
         chol, ridge = self.factors[prior]
         b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
-        return self._bounded_solve(chol, (self.basis @ b).astype(np.float64) + ridge * w0, sparsity)
+        h = (self.basis @ b).astype(np.float64) + ridge * w0
+        w = self._bounded_solve(chol, h, sparsity)
+        if reweight:
+            mu_max, eps, passes = reweight
+            for _ in range(int(passes)):
+                w = self._bounded_solve(chol, h, mu_max * eps / (w.astype(np.float64) + eps))
+        return w
 
-    def _bounded_solve(self, chol: np.ndarray, h: np.ndarray, sparsity: float) -> np.ndarray:
-        """argmin over w in [0,1]^53 of wᵀRᵀRw − 2hᵀw + μ Σw (R = chol (53,53) upper-triangular,
-        h (53,) float64, μ = sparsity · mean diag(AᵀA)): the unconstrained minimiser when it lies in
-        the box, else BVLS on R w ≈ R⁻ᵀ h -> (53,) float32."""
+    def _bounded_solve(self, chol: np.ndarray, h: np.ndarray, sparsity) -> np.ndarray:
+        """argmin over w in [0,1]^53 of wᵀRᵀRw − 2hᵀw + Σ μ_k w_k (R = chol (53,53) upper-triangular,
+        h (53,) float64, μ = sparsity · mean diag(AᵀA), sparsity a float or one per weight (53,)):
+        the unconstrained minimiser when it lies in the box, else BVLS on R w ≈ R⁻ᵀ h -> (53,)
+        float32."""
         from scipy.linalg import solve_triangular
         from scipy.optimize import lsq_linear
 
-        if sparsity > 0.0:
-            h = h - 0.5 * sparsity * float(np.trace(self.gram)) / len(self.gram)
+        if np.any(np.asarray(sparsity) > 0.0):
+            h = h - 0.5 * np.asarray(sparsity, np.float64) * float(np.trace(self.gram)) / len(self.gram)
         rhs = solve_triangular(chol, h, trans="T")
         w = solve_triangular(chol, rhs)
         if w.min() < 0.0 or w.max() > 1.0:
@@ -309,18 +322,20 @@ class Retargeter:
     #: Analysis-by-synthesis (``refine``): weight of the pull towards the encoder's estimate,
     #: relative to the mean squared norm of the baked shapes — weak for the codes that transfer
     #: decodes (the source frame explained as well as the rig can), stronger for the weights that
-    #: invert returns, which also get an L1 pull towards 0 (``SourceRig.fit``: the baked one-hot
-    #: shapes are not exactly the FACS shapes, and shapes that barely move the surface are not
-    #: identifiable from it); the ridge of the free dims (basis decoder); whether transfer and
+    #: invert returns, which also get an L1 pull towards 0, reweighted twice (``SourceRig.fit``:
+    #: the baked one-hot shapes are not exactly the FACS shapes, and shapes that barely move the
+    #: surface are not identifiable from it); the ridge of the free dims (basis decoder); whether transfer and
     #: invert fit the weights and the free dims together (``SourceRig.fit_joint``; transfer
     #: does: the frame is explained better; invert does not: the free dims would take what its
     #: weights must say); source rigs kept baked; vertices decoded per gradient step of the
     #: free-dims refinement (MLP decoder). Tuned on a tuning set apart from the eval's test set
-    #: (docs/RESULTS.md, "Stage 7" and "Refine: weights and free dims fitted together").
+    #: (docs/RESULTS.md, "Stage 7", "Refine: weights and free dims fitted together" and
+    #: "Inverse rigging's weights").
     REFINE_PRIOR = 1e-3
     REFINE_SPARSITY = 0.0
     REFINE_PRIOR_INVERT = 0.1
     REFINE_SPARSITY_INVERT = 0.02
+    REFINE_REWEIGHT_INVERT = (0.1, 0.05, 2)
     REFINE_FREE_PRIOR = 1e-3
     REFINE_JOINT = True
     REFINE_JOINT_INVERT = False
@@ -478,11 +493,12 @@ class Retargeter:
         ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames.
         ``refine``: analysis-by-synthesis on the source's own baked rig (needs ``source_neutral``;
         see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT`` and
-        towards 0 with ``REFINE_SPARSITY_INVERT``."""
+        towards 0 with ``REFINE_SPARSITY_INVERT``, reweighted by ``REFINE_REWEIGHT_INVERT``."""
         z = self.expression_codes(frames, source_neutral, smooth, fps, progress, refine,
                                   refine_prior=self.REFINE_PRIOR_INVERT,
                                   refine_sparsity=self.REFINE_SPARSITY_INVERT,
-                                  refine_joint=self.REFINE_JOINT_INVERT)
+                                  refine_joint=self.REFINE_JOINT_INVERT,
+                                  refine_reweight=self.REFINE_REWEIGHT_INVERT)
         return np.clip(z[..., :N_FACS], 0.0, 1.0).astype(np.float32)
 
     # --------------------------------------------------------------------------- analysis by synthesis
@@ -503,7 +519,7 @@ class Retargeter:
 
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
                prior: float | None = None, sparsity: float | None = None,
-               joint: bool | None = None) -> np.ndarray:
+               joint: bool | None = None, reweight: tuple = ()) -> np.ndarray:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
@@ -514,7 +530,8 @@ class Retargeter:
         topology; z_ge (128,) or (T,128) -> the same shape, float32. prior: the weights' pull
         towards the encoder (default ``REFINE_PRIOR``); sparsity: their L1 pull towards 0
         (``SourceRig.fit``; default ``REFINE_SPARSITY``). joint: weights and free dims fitted
-        together (``SourceRig.fit_joint``, basis decoder; default ``REFINE_JOINT``)."""
+        together (``SourceRig.fit_joint``, basis decoder; default ``REFINE_JOINT``). reweight:
+        reweighted L1 of the weights-alone fit (``SourceRig.fit``; () = off)."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
                                 "--source-neutral on the command line)")
@@ -532,7 +549,7 @@ class Retargeter:
                     out[i, :N_FACS], out[i, N_FACS:] = rig.fit_joint(frame.vertices, w0, prior,
                                                                      sparsity)
                     continue
-                out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity)
+                out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity, reweight)
                 if rig.free_basis is not None:
                     out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             if rig.free_basis is None and self.refine_steps > 0:
@@ -616,14 +633,16 @@ class Retargeter:
                          progress: bool = False, refine: bool = False,
                          refine_prior: float | None = None,
                          refine_sparsity: float | None = None,
-                         refine_joint: bool | None = None) -> np.ndarray:
+                         refine_joint: bool | None = None,
+                         refine_reweight: tuple = ()) -> np.ndarray:
         """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), refined by
         analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior``,
-        ``refine_sparsity`` and ``refine_joint``), temporally filtered when ``smooth`` is given
-        (see ``invert``)."""
+        ``refine_sparsity``, ``refine_joint`` and ``refine_reweight``), temporally filtered when
+        ``smooth`` is given (see ``invert``)."""
         z = self.encode(source, source_neutral, progress)
         if refine:
-            z = self.refine(source, source_neutral, z, refine_prior, refine_sparsity, refine_joint)
+            z = self.refine(source, source_neutral, z, refine_prior, refine_sparsity, refine_joint,
+                            refine_reweight)
         if smooth and z.ndim == 2:
             z = smooth_codes(z, smooth, fps)
         return z

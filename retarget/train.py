@@ -57,7 +57,9 @@ DEFAULTS = {
         },
     },
     "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,
-             "bp": 1.0, "br": 1.0, "nll": 1.0, "rig": 0.0, "free_dims_dropout": 0.0},
+             "bp": 1.0, "br": 1.0, "nll": 1.0, "rig": 0.0, "free_dims_dropout": 0.0,
+             # L_rig relative to each shape's size (nets.losses.rig_loss's τ; 0 = plain)
+             "rig_relative": 0.0},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
     "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
               "ckpt_minutes": 5.0,
@@ -284,7 +286,8 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
     out["L_BR"] = L.blendshape_reconstruction_loss(model, t_feat, c_t, codes, z_br, basis_t, rows)
     if loss_cfg["rig"] > 0:
         shapes = rig_shapes(model, tgt.present, rng).to(device)
-        out["L_rig"] = L.rig_loss(model, t_feat, c_t, codes, basis_t, rows, shapes)
+        out["L_rig"] = L.rig_loss(model, t_feat, c_t, codes, basis_t, rows, shapes,
+                                  loss_cfg["rig_relative"])
     if codes.z_skin is not None and tgt.rig.segments is not None:
         labels = torch.from_numpy(tgt.rig.segments).to(device)
         out["L_nll"] = L.segmentation_nll(codes.z_skin, labels)

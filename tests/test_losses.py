@@ -224,6 +224,18 @@ def test_rig_loss_is_zero_on_the_decoders_own_one_hot_shapes_and_trains_the_deco
     rows, shapes = torch.arange(0, mesh["feat"].shape[0], 2), torch.tensor([7, 9])
     torch.testing.assert_close(losses.rig_loss(model, mesh["feat"], c, codes, other, rows, shapes),
                                torch.tensor(0.04 / 2), rtol=1e-4, atol=1e-7)
+    # relative (τ): shape 7's error over its own size in the rig, against the rig's mean size
+    size = other.pow(2).sum(-1).mean(-1)
+    weight = size.mean() / (size[7] + 0.05 * size.mean())
+    torch.testing.assert_close(losses.rig_loss(model, mesh["feat"], c, codes, other, relative=0.05),
+                               0.04 * weight / 53, rtol=1e-4, atol=1e-7)
+    # a shape the rig draws far smaller than the decoder: its error weighs up to 1/τ times more
+    k = int(own.pow(2).sum(-1).mean(-1).argmin())
+    tiny = own.clone()
+    tiny[k] *= 0.05
+    plain = losses.rig_loss(model, mesh["feat"], c, codes, tiny)
+    relative = losses.rig_loss(model, mesh["feat"], c, codes, tiny, relative=0.05)
+    assert 10 * plain < relative <= 20 * plain * (1 + 1e-4)
     model.train()
     codes = model.encode_target(mesh["feat"], c, mesh["ops"])
     grads = _grads(model, losses.rig_loss(model, mesh["feat"], c, codes, 0.1 * other), "")

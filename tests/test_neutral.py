@@ -202,6 +202,28 @@ def test_sparse_fit_is_the_minimiser_of_the_l1_objective(rig):
         assert fit.sum() < plain.sum()
 
 
+def test_reweighted_fit_leaves_the_unused_shapes_at_0(rig):
+    """SourceRig.fit with reweight: a frame of a few shapes, with the prior pulling every weight
+    towards 0.2, is explained by weights nearer the true ones than the plain L1 fit's, with less
+    weight on the shapes the frame does not use."""
+    rng = np.random.default_rng(4)
+    w = np.zeros(53, np.float32)
+    active = rng.choice(53, 5, replace=False)
+    w[active] = rng.uniform(0.5, 0.9, 5)
+    src = SourceRig.make(None, BakedRig(rig.neutral, rig.deltas))
+    frame = rig.evaluate(w) + 0.002 * rng.standard_normal(rig.neutral.shape)
+    w0 = np.full(53, 0.2, np.float32)
+    plain = src.fit(frame, w0, prior=0.1, sparsity=0.02)
+    again = src.fit(frame, w0, prior=0.1, sparsity=0.02, reweight=())
+    np.testing.assert_array_equal(plain, again)
+    rew = src.fit(frame, w0, prior=0.1, sparsity=0.02, reweight=(0.1, 0.05, 2))
+    assert rew.min() >= 0 and rew.max() <= 1
+    unused = np.ones(53, bool)
+    unused[active] = False
+    assert rew[unused].sum() < 0.5 * plain[unused].sum()
+    assert np.abs(rew - w).mean() < np.abs(plain - w).mean()
+
+
 def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
     neutral = Mesh(rig.neutral, rig.faces)
     baked = r.source_rig(neutral).baked
@@ -219,7 +241,7 @@ def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
     inverted = r.invert(frames, source_neutral=neutral, refine=True)
     np.testing.assert_array_equal(inverted, r.expression_codes(
         frames, source_neutral=neutral, refine=True, refine_prior=r.REFINE_PRIOR_INVERT,
-        refine_sparsity=r.REFINE_SPARSITY_INVERT)[:, :53])
+        refine_sparsity=r.REFINE_SPARSITY_INVERT, refine_reweight=r.REFINE_REWEIGHT_INVERT)[:, :53])
     encoder = np.clip(r.invert(frames, source_neutral=neutral), 0, 1)
     assert np.abs(inverted - encoder).mean() < np.abs(w - encoder).mean()
     with pytest.raises(Exception, match="refine needs the source's neutral"):

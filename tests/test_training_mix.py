@@ -119,3 +119,12 @@ def test_stage6_study_configs_change_one_switch_of_the_bundled_design():
     assert _without(mh75, "data", "sources") == _without(base, "data", "sources")
     assert (_without(share25, "data", "source_neutral_share")
             == _without(base, "data", "source_neutral_share"))
+
+
+def test_relative_rig_config_changes_only_l_rig_of_the_bundled_run():
+    """realistic_rig_relative.yaml (stage 12's study) is realistic_rig_partial.yaml, the bundled
+    run's config, with L_rig relative to each shape's size."""
+    base = load_config(ROOT / "configs" / "train" / "realistic_rig_partial.yaml")
+    rel = load_config(ROOT / "configs" / "train" / "realistic_rig_relative.yaml")
+    assert (base["loss"]["rig_relative"], rel["loss"]["rig_relative"]) == (0.0, 0.05)
+    assert _without(rel, "loss", "rig_relative") == _without(base, "loss", "rig_relative")
