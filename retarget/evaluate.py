@@ -62,6 +62,7 @@ only on the eval config:
 from __future__ import annotations
 
 import copy
+import hashlib
 import math
 import time
 from dataclasses import dataclass, field
@@ -423,6 +424,7 @@ class NetworkMethod:
         self.r = retargeter
         self.mode = mode
         self._targets: dict = {} if targets is None else targets
+        self._estimates: dict = {}        # mode "estimate": digest of a take's frames -> neutral
 
     def _target(self, rig):
         if id(rig) not in self._targets:
@@ -436,8 +438,11 @@ class NetworkMethod:
         frames = [Mesh(f, case.source.faces) for f in case.source_frames]
         if self.mode == "none":
             return frames, None
-        if self.mode == "estimate":
-            return frames, self.r.estimate_neutral(frames)
+        if self.mode == "estimate":      # once per take: several cases share their frames
+            key = hashlib.sha1(np.ascontiguousarray(case.source_frames).tobytes()).hexdigest()
+            if key not in self._estimates:
+                self._estimates[key] = self.r.estimate_neutral(frames)
+            return frames, self._estimates[key]
         return frames, Mesh(case.source.neutral, case.source.faces)
 
     def transfer(self, case: Case, filters=(None,), fps: float = 30.0) -> dict:

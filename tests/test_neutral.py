@@ -473,6 +473,25 @@ def test_eval_neutral_modes_make_a_row_each(files, tmp_path):
     assert inverse["n (no neutral)"]["weight_mae"] != inverse["n (neutral)"]["weight_mae"]
 
 
+def test_eval_estimates_a_takes_neutral_once(r, monkeypatch):
+    """Mode "estimate": cases that share their frames (the ARKit rig's transfer and inversion)
+    share one estimate; another take gets its own."""
+    from retarget.evaluate import EvalData, NetworkMethod, load_eval_config
+
+    calls = []
+    estimate = r.estimate_neutral
+    monkeypatch.setattr(r, "estimate_neutral", lambda frames: calls.append(1) or estimate(frames))
+    data = EvalData(load_eval_config(TINY_EVAL))
+    first, other = data.cases("self")[0], data.cases("inverse")[0]
+    method = NetworkMethod("n", r, "estimate")
+    a = method.invert(first)
+    method.transfer(first)
+    assert len(calls) == 1
+    np.testing.assert_array_equal(method.invert(first), a)
+    method.invert(other)
+    assert len(calls) == 2
+
+
 def test_eval_refuses_negative_refine_steps(files, tmp_path, capsys):
     assert main(["eval", "--config", str(TINY_EVAL), "--checkpoint", str(files / "tiny.pt"),
                  "--suite", "inverse", "--neutral-modes", "refine", "--refine-steps", "-2",
