@@ -381,17 +381,27 @@ def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
     assert res.returncode == 2 and "--init-fresh needs --init-partial" in res.stderr
 
 
-@pytest.mark.parametrize("name", ["realistic_rig", "realistic_rig_partial"])
+# each committed state (training/README.md) and the config its README resumes it under
+COMMITTED_STATES = {"stage10": "realistic_rig_partial"}
+
+
+def test_every_committed_state_is_listed():
+    """A state added to training/ (a folder with last.pt) gets its resume test."""
+    states = {p.parent.name for p in (ROOT / "training").glob("*/last.pt")}
+    assert states == set(COMMITTED_STATES)
+
+
+@pytest.mark.parametrize("name", sorted(COMMITTED_STATES))
 def test_committed_resumable_state_resumes_under_its_config(tmp_path, name):
-    """training/NAME (realistic_rig: the bundled model's run) resumes under configs/train/NAME.yaml
-    with the command its README gives: its model is the config's, its optimizer loads, and its step
-    is that of the last row of its log, or a few steps past it for a run stopped by Ctrl-C."""
+    """training/NAME (stage10: the bundled model's run) resumes under its config with the command
+    its README gives: its model is the config's, its optimizer loads, and its step is that of the
+    last row of its log, or a few steps past it for a run stopped by Ctrl-C."""
     import csv
     import shutil
     state_dir = ROOT / "training" / name
     run = tmp_path / "next"
     shutil.copytree(state_dir, run)
-    cfg = load_config(ROOT / "configs" / "train" / f"{name}.yaml")
+    cfg = load_config(ROOT / "configs" / "train" / f"{COMMITTED_STATES[name]}.yaml")
     cfg["train"]["seed"] = 1
     trainer = Trainer(cfg, run, progress=False)
     assert trainer.resume()
