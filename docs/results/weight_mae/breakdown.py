@@ -42,7 +42,7 @@ VARIANTS = {
        for s0 in (0.0, 0.05)},
     **{f"prior {p}, reweight 0.1, eps 0.05": {"REFINE_PRIOR_INVERT": p,
                                               "REFINE_REWEIGHT_INVERT": (0.1, 0.05, 2)}
-       for p in (0.05, 0.2)},
+       for p in (0.01, 0.02, 0.05, 0.2)},
 }
 
 
