@@ -128,3 +128,13 @@ def test_relative_rig_config_changes_only_l_rig_of_the_bundled_run():
     rel = load_config(ROOT / "configs" / "train" / "realistic_rig_relative.yaml")
     assert (base["loss"]["rig_relative"], rel["loss"]["rig_relative"]) == (0.0, 0.05)
     assert _without(rel, "loss", "rig_relative") == _without(base, "loss", "rig_relative")
+
+
+def test_heavy_rig_config_changes_only_the_weight_of_relative_l_rig():
+    """realistic_rig_heavy.yaml (stage 13) is realistic_rig_relative.yaml with L_rig ten times as
+    heavy, the rest of the bundled run's config unchanged."""
+    rel = load_config(ROOT / "configs" / "train" / "realistic_rig_relative.yaml")
+    heavy = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy.yaml")
+    assert (rel["loss"]["rig"], heavy["loss"]["rig"]) == (10.0, 100.0)
+    assert heavy["loss"]["rig_relative"] == 0.05
+    assert _without(heavy, "loss", "rig") == _without(rel, "loss", "rig")
