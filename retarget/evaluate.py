@@ -997,10 +997,11 @@ def parse_checkpoints(specs) -> list[tuple[str, Path]]:
 
 def merge_results(paths) -> dict:
     """One results dict from several ``eval.json`` files of the same eval config (e.g. checkpoints
-    evaluated as their trainings finished): their methods side by side, suite by suite, in the
-    order given (``sort_methods``). The baselines depend only on the config, so the first file's
-    rows are kept; the do-nothing ratios are recomputed. RetargetError naming the file for an
-    unreadable file, another config, or a checkpoint name that two files share."""
+    evaluated as their trainings finished, or one checkpoint's suites evaluated in parallel runs):
+    their methods side by side, suite by suite, in the order given (``sort_methods``). The baselines
+    depend only on the config, so the first file's rows are kept; the do-nothing ratios are
+    recomputed. RetargetError naming the file for an unreadable file, another config, a method
+    that two files both have in one suite, or one checkpoint name given to two checkpoints."""
     import json
 
     merged = None
@@ -1020,10 +1021,17 @@ def merge_results(paths) -> dict:
             raise RetargetError(f"{path}: evaluated with another eval config than {paths[0]}; only "
                                 f"results of the same config can share a table")
         baselines = BASELINES_FIRST + BASELINES_LAST   # the same config gives the same rows
-        twice = sorted((set(methods) & set(merged["methods"])) - set(baselines))
+        twice = sorted({m for name, suite in suites.items() if name in merged["suites"]
+                        for m in set(suite["methods"]) & set(merged["suites"][name]["methods"])}
+                       - set(baselines))
         if twice:
             raise RetargetError(f"{path}: method(s) {twice} already in the merged table (rename one "
                                 f"with --checkpoint NAME=PATH)")
+        for name, ckpt in res.get("checkpoints", {}).items():
+            if merged["checkpoints"].get(name, ckpt) != ckpt:
+                raise RetargetError(f"{path}: checkpoint name {name!r} is {ckpt}, but "
+                                    f"{merged['checkpoints'][name]} in an earlier file (rename one "
+                                    f"with --checkpoint NAME=PATH)")
         merged["methods"] += [m for m in methods if m not in merged["methods"]]
         merged["checkpoints"].update(res.get("checkpoints", {}))
         for name, suite in suites.items():

@@ -384,3 +384,26 @@ def test_merge_puts_separately_evaluated_checkpoints_in_one_table(tmp_path, caps
     (tmp_path / "junk.json").write_text("[1, 2]")
     assert main(["eval", "--merge", str(tmp_path / "junk.json")]) == 2
     assert "junk.json: not an eval.json" in capsys.readouterr().err
+
+
+def test_merge_joins_one_checkpoints_suites_evaluated_apart(tmp_path, capsys):
+    """One checkpoint's suites run in two processes merge into one table, as one run gives it; one
+    name for two checkpoints is refused."""
+    ck = tiny_checkpoint(tmp_path / "a.pt")
+    for out, suites in (("whole", ["self", "inverse"]), ("p1", ["self"]), ("p2", ["inverse"])):
+        assert main(["eval", "--config", str(TINY), "--checkpoint", f"a={ck}", "--suite", *suites,
+                     "--no-progress", "--out", str(tmp_path / out)]) == 0
+    assert main(["eval", "--merge", str(tmp_path / "p1/eval.json"), str(tmp_path / "p2/eval.json"),
+                 "--out", str(tmp_path / "joined")]) == 0
+    whole = json.loads((tmp_path / "whole/eval.json").read_text())
+    joined = json.loads((tmp_path / "joined/eval.json").read_text())
+    assert joined["methods"] == whole["methods"] and set(joined["suites"]) == {"self", "inverse"}
+    for suite in ("self", "inverse"):
+        assert joined["suites"][suite]["methods"]["a"] == whole["suites"][suite]["methods"]["a"]
+        assert joined["suites"][suite]["ratios"] == whole["suites"][suite]["ratios"]
+    capsys.readouterr()
+    other = json.loads((tmp_path / "p2/eval.json").read_text())
+    other["checkpoints"]["a"] = "elsewhere.pt"
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    assert main(["eval", "--merge", str(tmp_path / "p1/eval.json"), str(tmp_path / "other.json")]) == 2
+    assert "checkpoint name 'a' is elsewhere.pt" in capsys.readouterr().err
