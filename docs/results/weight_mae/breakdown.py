@@ -97,14 +97,28 @@ def by_kind(rows: dict) -> dict:
     return out
 
 
+def baked_and_true(r: Retargeter, rig, ict_sums: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The decoder's baked one-hot shapes B̂ on ``rig``'s neutral and the rig's true shapes B, both
+    flattened (K, V·3) in mm over the K shapes the rig has (|B_k| > 0), with |B_k| (K,).
+    ict_sums: an ARKit rig, its shapes against the sums of their ICT shapes (``arkit_ict_matrix``)."""
+    from retarget.mesh import Mesh
+
+    baked = r.source_rig(Mesh(rig.neutral, rig.faces)).baked.deltas.reshape(53, -1)
+    true = rig.deltas.reshape(len(rig.deltas), -1)
+    if ict_sums:
+        m = arkit_ict_matrix(rig.names)
+        baked, true = (m @ baked)[m.sum(1) > 0], true[m.sum(1) > 0]
+    norm = np.linalg.norm(true, axis=1)
+    keep = norm > 0
+    return baked[keep], true[keep], norm[keep]
+
+
 def shape_errors(r: Retargeter, data: EvalData) -> dict:
     """How far the decoder's baked rig on each source neutral of the inversion cases is from that
     rig's true shapes: suite -> {"median", "mean", "small", "large"} of the relative error
     |B̂_k − B_k| / |B_k| over the shapes (small / large: the half of the shapes with the smaller /
     larger |B_k|), averaged over the cases' identities; the ARKit rig's shapes against the sums
     of their ICT shapes (``arkit_ict_matrix``)."""
-    from retarget.mesh import Mesh
-
     out = {}
     rigs = {"inverse": [c.source for c in data.cases("inverse")],
             "head_inverse": [c.source for c in data.cases("head_inverse")],
@@ -112,15 +126,9 @@ def shape_errors(r: Retargeter, data: EvalData) -> dict:
     for suite, sources in rigs.items():
         stats = []
         for rig in sources:
-            baked = r.source_rig(Mesh(rig.neutral, rig.faces)).baked.deltas.reshape(53, -1)
-            true = rig.deltas.reshape(len(rig.deltas), -1)
-            if suite == "real_rig":                           # ARKit shapes: their ICT shapes' sum
-                m = arkit_ict_matrix(rig.names)
-                baked, true = (m @ baked)[m.sum(1) > 0], true[m.sum(1) > 0]
-            norm = np.linalg.norm(true, axis=1)
-            keep = norm > 0                                   # shapes the rig has
-            rel = np.linalg.norm(baked - true, axis=1)[keep] / norm[keep]
-            small = norm[keep] <= np.median(norm[keep])
+            baked, true, norm = baked_and_true(r, rig, ict_sums=suite == "real_rig")
+            rel = np.linalg.norm(baked - true, axis=1) / norm
+            small = norm <= np.median(norm)
             stats.append((np.median(rel), rel.mean(), rel[small].mean(), rel[~small].mean()))
         out[suite] = dict(zip(("median", "mean", "small", "large"), np.mean(stats, 0).tolist()))
     return out

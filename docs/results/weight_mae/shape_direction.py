@@ -16,9 +16,9 @@ import argparse
 
 import numpy as np
 
+from breakdown import baked_and_true
 from retarget.api import Retargeter
 from retarget.evaluate import EvalData, load_eval_config
-from retarget.mesh import Mesh
 
 
 def shape_stats(r: Retargeter, data: EvalData, suite: str) -> dict:
@@ -27,12 +27,7 @@ def shape_stats(r: Retargeter, data: EvalData, suite: str) -> dict:
     (median over shapes of std / |mean|)."""
     gains, cos, rel = [], [], []
     for case in data.cases(suite):
-        rig = case.source
-        baked = r.source_rig(Mesh(rig.neutral, rig.faces)).baked.deltas.reshape(53, -1)
-        true = rig.deltas.reshape(len(rig.deltas), -1)
-        norm = np.linalg.norm(true, axis=1)
-        keep = norm > 0
-        b, t, n = baked[keep], true[keep], norm[keep]
+        b, t, n = baked_and_true(r, case.source)
         dot = (b * t).sum(1)
         gains.append(dot / np.maximum((b * b).sum(1), 1e-20))
         cos.append(dot / np.maximum(np.linalg.norm(b, axis=1) * n, 1e-20))
