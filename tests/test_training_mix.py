@@ -131,7 +131,7 @@ def test_relative_rig_config_changes_only_l_rig_of_the_bundled_run():
 
 
 def test_heavy_rig_config_changes_only_the_weight_of_relative_l_rig():
-    """realistic_rig_heavy.yaml (stage 13) is realistic_rig_relative.yaml with L_rig ten times as
+    """realistic_rig_heavy.yaml (stages 13 and 14, the bundled run) is realistic_rig_relative.yaml with L_rig ten times as
     heavy, the rest of the bundled run's config unchanged."""
     rel = load_config(ROOT / "configs" / "train" / "realistic_rig_relative.yaml")
     heavy = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy.yaml")
