@@ -15,7 +15,7 @@ from pathlib import Path
 import torch
 
 from data_synth.facs import N_FACS
-from nets.model import NFSConfig, NFSModel
+from nets.model import NEUTRAL_CHANNEL_DIM, NFSConfig, NFSModel
 
 from .errors import RetargetError
 from .io import atomic_output, regular_file
@@ -156,13 +156,17 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                ) -> dict[str, list[str]]:
     """Copy into ``model`` the weights of ``initial``, a model of another config (a new design
     started from a trained one), and return what was done: {"copied": [...], "widened": [...],
-    "fresh": [...]} parameter names.
+    "narrowed": [...], "fresh": [...]} parameter names.
 
     A tensor is copied when its name and shape agree, except the decoder's when the two decoders
     differ in kind (``mlp`` / ``basis``: the same shapes mean different things). The expression
     encoder's first layer, widened by the neutral channels (``NFSConfig.neutral_channels``, appended
     after [v, c]), takes the old columns and zeros for the new ones, so the warm-started encoder
-    computes what the old one did until training moves it. The three DiffusionNet encoders of a
+    computes what the old one did until training moves it; narrowed (a model without the neutral
+    channels started from one with them: the ``no_neutral`` ablation at the same budget), it keeps
+    the old columns of [v, c], and the no-neutral flag's column, which is 1 whenever the neutral is
+    unknown, goes into the bias: the narrowed encoder computes what the old one did without the
+    neutral (``narrowed`` in the report). The three DiffusionNet encoders of a
     larger ``enc_width`` (the same number of blocks) are widened the same way
     (``widen_encoder_tensor``). Everything else keeps its fresh
     initialisation, except a fresh decoder's last layer, which starts at zero: the warm-started
@@ -181,7 +185,7 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                          f"{', '.join(sorted(known))})")
     fresh = set(fresh) | ({"decoder"} if model.cfg.decoder != initial.cfg.decoder else set())
     widths = (initial.cfg.enc_width, model.cfg.enc_width)
-    report: dict[str, list[str]] = {"copied": [], "widened": [], "fresh": []}
+    report: dict[str, list[str]] = {"copied": [], "widened": [], "narrowed": [], "fresh": []}
     with torch.no_grad():
         for name, tensor in new.items():
             src = old.get(name)
@@ -194,12 +198,19 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                   and src.shape[0] == tensor.shape[0] and src.shape[1] < tensor.shape[1]):
                 _embed(src, tensor, zero=True)
                 report["widened"].append(name)
+            elif (name == "expression_encoder.first.weight" and src.dim() == 2
+                  and src.shape[0] == tensor.shape[0]
+                  and src.shape[1] == tensor.shape[1] + NEUTRAL_CHANNEL_DIM):
+                tensor.copy_(src[:, :tensor.shape[1]])
+                report["narrowed"].append(name)
             elif (name.split(".")[0] in ENCODERS and widths[0] < widths[1]
                   and model.cfg.enc_blocks == initial.cfg.enc_blocks):
                 widen_encoder_tensor(name.split(".", 1)[1], src, tensor, *widths)
                 report["widened"].append(name)
             else:
                 report["fresh"].append(name)
+        if report["narrowed"]:   # flag 1 (no neutral) times its column, now a constant
+            new["expression_encoder.first.bias"] += old["expression_encoder.first.weight"][:, -1]
         if "decoder" in fresh:   # (the state dict's tensors are the model's own: no load needed)
             model.decoder[-1].weight.zero_()
             model.decoder[-1].bias.zero_()

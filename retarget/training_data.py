@@ -251,14 +251,16 @@ def make_source(entry: Entry, weights: np.ndarray, kind: str, rng: np.random.Gen
     With ``model_cfg.neutral_channels``, a share ``neutral_share`` of sources also gets its neutral
     (the rig's neutral under the same augmentation): the frame is then canonicalised in the
     neutral's frame (as ``Retargeter.encode`` does with ``source_neutral``) and carries the neutral
-    channels. Without the switch no random number is drawn for it (the samples stay as before)."""
+    channels. The draw is made whenever ``neutral_share`` > 0, with or without the switch: a model
+    without the neutral channels (the ``no_neutral`` ablation) sees the same sources as one with
+    them, less their neutrals; with no share (the procedural configs) none is drawn."""
     frame = entry.rig.evaluate(weights).astype(np.float64)
     rot = random_rotation(rng, augment.get("rotate_deg", 0.0))
     scale = np.exp(rng.uniform(-1, 1) * augment.get("scale", 0.0))
     shift = rng.normal(size=3) * augment.get("translate", 0.0)
     frame = (frame @ rot.T) * scale + shift
     canon, channels = None, None
-    if model_cfg.neutral_channels and rng.random() < neutral_share:
+    if neutral_share > 0 and rng.random() < neutral_share and model_cfg.neutral_channels:
         neutral = (entry.rig.neutral.astype(np.float64) @ rot.T) * scale + shift
         canon = Canonicaliser.fit(neutral, kind=model_cfg.canonical, faces=entry.rig.faces)
         channels = neutral_channels(canon.to_canonical(frame), canon.to_canonical(neutral),

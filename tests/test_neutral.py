@@ -140,12 +140,22 @@ def test_training_gives_a_share_of_sources_their_neutral(tmp_path):
                                                   progress=False).pool.sample(0).sources)
 
 
-def test_without_the_switch_the_training_samples_are_unchanged(tmp_path):
-    a = Trainer(_cfg(False, 0.0), tmp_path / "a", progress=False).pool.sample(3)
-    b = Trainer(_cfg(False, 1.0), tmp_path / "b", progress=False).pool.sample(3)
-    for sa, sb in zip(a.sources, b.sources):
-        assert sb.neutral is None
-        assert np.array_equal(sa.feat, sb.feat) and np.array_equal(sa.weights, sb.weights)
+def test_the_no_neutral_ablation_sees_the_same_sources_less_their_neutrals(tmp_path):
+    pools = (Trainer(_cfg(True, 0.5), tmp_path / "a", progress=False).pool,
+             Trainer(_cfg(False, 0.5), tmp_path / "b", progress=False).pool)
+    given = []
+    for step in range(4):
+        with_channels, ablation = (pool.sample(step) for pool in pools)
+        for sa, sb in zip(with_channels.sources, ablation.sources):
+            given.append(sa.neutral is not None)
+            assert sb.neutral is None and sa.kind == sb.kind
+            assert np.array_equal(sa.weights, sb.weights)
+            if sa.neutral is None:              # canonicalised on its own in both: the same input
+                assert np.array_equal(sa.feat, sb.feat)
+    assert any(given) and not all(given)
+    # no share: no draw, so the procedural configs' samples stay as they were
+    none = Trainer(_cfg(False, 0.0), tmp_path / "c", progress=False).pool.sample(3)
+    assert [s.kind for s in none.sources] != [] and all(s.neutral is None for s in none.sources)
 
 
 def test_neutral_and_no_neutral_configs_differ_from_default_only_in_the_switch():

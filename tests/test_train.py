@@ -299,6 +299,19 @@ def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_ne
         codes = new.encode_target(feat, c, ops)
         z = torch.rand(new.cfg.code_dim)
         assert torch.count_nonzero(new.decode_target(feat, c, codes, z[None])) == 0
+        # and back: the no_neutral ablation started from a trained neutral-aware model computes what
+        # that model does without the neutral (the flag's column folded into the bias)
+        with torch.no_grad():
+            new.expression_encoder.first.weight.normal_()   # as if trained: every column matters
+        torch.manual_seed(2)
+        narrow = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2))
+        report = warm_start(narrow, new)
+        assert report["narrowed"] == ["expression_encoder.first.weight"] and not report["widened"]
+        torch.testing.assert_close(narrow.encode_expression(feat, c, ops),
+                                   new.encode_expression(feat, c, ops), rtol=1e-5, atol=1e-5)
+        assert not torch.allclose(narrow.encode_expression(feat, c, ops),
+                                  new.encode_expression(feat, c, ops,
+                                                        neutral=torch.zeros(feat.shape[0], 7)))
     same = NFSModel(NFSConfig.preset("tiny", decoder_width=16))   # same decoder kind, other widths
     report = warm_start(same, old)
     assert "decoder.0.weight" in report["fresh"] and "decoder.0.weight" not in report["copied"]

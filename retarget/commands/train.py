@@ -111,12 +111,14 @@ def training_config(args) -> tuple[dict, str]:
 
 
 def describe_warm_start(init: str, report: dict) -> str:
-    """One paragraph for --init-partial: how many tensors were copied, widened and started fresh
-    (the fresh ones' module names)."""
+    """One paragraph for --init-partial: how many tensors were copied, widened, narrowed and
+    started fresh (the fresh ones' module names)."""
     fresh = sorted({name.rsplit(".", 1)[0].split(".")[0] for name in report["fresh"]})
+    narrowed = (f"{len(report['narrowed'])} narrowed ({', '.join(report['narrowed'])}), "
+                if report.get("narrowed") else "")
     return (f"warm start from {init}: {len(report['copied'])} tensors copied, "
             f"{len(report['widened'])} widened ({', '.join(report['widened']) or 'none'}), "
-            f"{len(report['fresh'])} fresh ({', '.join(fresh) or 'none'})")
+            f"{narrowed}{len(report['fresh'])} fresh ({', '.join(fresh) or 'none'})")
 
 
 def run(args) -> int:
