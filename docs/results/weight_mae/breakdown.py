@@ -43,6 +43,13 @@ VARIANTS = {
     **{f"prior {p}, reweight 0.1, eps 0.05": {"REFINE_PRIOR_INVERT": p,
                                               "REFINE_REWEIGHT_INVERT": (0.1, 0.05, 2)}
        for p in (0.01, 0.02, 0.05, 0.2)},
+    # stage 14's retune: its baked shapes are off by 0.24-0.42 of their size (stage 10: ~0.8), and
+    # rig_accuracy.md's α table has the bundled fit's strong prior as the limit once they are
+    # below ~0.4, so weaker priors and pulls
+    **{f"prior {p}, sparsity {s0}, reweight {mu}": {
+        "REFINE_PRIOR_INVERT": p, "REFINE_SPARSITY_INVERT": s0,
+        "REFINE_REWEIGHT_INVERT": (mu, 0.05, 2) if mu else ()}
+       for p in (0.003, 0.01, 0.03) for s0, mu in ((0.0, 0.0), (0.005, 0.02), (0.02, 0.1))},
 }
 
 
