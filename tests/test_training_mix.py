@@ -131,10 +131,19 @@ def test_relative_rig_config_changes_only_l_rig_of_the_bundled_run():
 
 
 def test_heavy_rig_config_changes_only_the_weight_of_relative_l_rig():
-    """realistic_rig_heavy.yaml (stages 13 and 14, the bundled run) is realistic_rig_relative.yaml with L_rig ten times as
+    """realistic_rig_heavy.yaml (stages 13 to 15, the bundled run) is realistic_rig_relative.yaml with L_rig ten times as
     heavy, the rest of the bundled run's config unchanged."""
     rel = load_config(ROOT / "configs" / "train" / "realistic_rig_relative.yaml")
     heavy = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy.yaml")
     assert (rel["loss"]["rig"], heavy["loss"]["rig"]) == (10.0, 100.0)
     assert heavy["loss"]["rig_relative"] == 0.05
     assert _without(heavy, "loss", "rig") == _without(rel, "loss", "rig")
+
+
+def test_heavy_no_neutral_ablation_differs_from_the_bundled_config_only_in_the_encoder():
+    """realistic_rig_heavy_no_neutral.yaml (the no_neutral ablation at the bundled budget) is the
+    bundled run's config with the paper's expression encoder: same data, loss, schedule."""
+    heavy = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy.yaml")
+    ablation = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy_no_neutral.yaml")
+    assert (heavy["model"]["neutral_channels"], ablation["model"]["neutral_channels"]) == (True, False)
+    assert _without(ablation, "model", "neutral_channels") == _without(heavy, "model", "neutral_channels")

@@ -8,7 +8,10 @@ expression encoder's first layer dropped, the no-neutral flag's column folded in
 narrowed model computes what the neutral-aware one does without the neutral). AdamW's moments of
 that weight keep the same columns; the bias's moments are kept as they are.
 
-    python docs/results/no_neutral_ablation/narrow_state.py training/stage14 \
+    mkdir -p runs/stage14     # stage 14's state, kept at commit 98177ce
+    git show 98177ce:training/stage14/last.pt > runs/stage14/last.pt
+    git show 98177ce:training/stage14/train_log.csv > runs/stage14/train_log.csv
+    python docs/results/no_neutral_ablation/narrow_state.py runs/stage14 \
         configs/train/realistic_rig_heavy_no_neutral.yaml runs/ablation_no_neutral
     retarget train --config realistic_rig_heavy_no_neutral --seed 1 --steps 12000 --lr 1e-4 \
         --max-minutes 0 --out runs/ablation_no_neutral --resume --data-workers 1
