@@ -140,6 +140,15 @@ def test_heavy_rig_config_changes_only_the_weight_of_relative_l_rig():
     assert _without(heavy, "loss", "rig") == _without(rel, "loss", "rig")
 
 
+def test_heavier_rig_config_changes_only_the_weight_of_l_rig():
+    """realistic_rig_heavier.yaml (stage 16) is the bundled run's config with L_rig three times as
+    heavy."""
+    heavy = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy.yaml")
+    heavier = load_config(ROOT / "configs" / "train" / "realistic_rig_heavier.yaml")
+    assert (heavy["loss"]["rig"], heavier["loss"]["rig"]) == (100.0, 300.0)
+    assert _without(heavier, "loss", "rig") == _without(heavy, "loss", "rig")
+
+
 def test_heavy_no_neutral_ablation_differs_from_the_bundled_config_only_in_the_encoder():
     """realistic_rig_heavy_no_neutral.yaml (the no_neutral ablation at the bundled budget) is the
     bundled run's config with the paper's expression encoder: same data, loss, schedule."""
