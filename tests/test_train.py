@@ -395,7 +395,7 @@ def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
 
 
 # each committed state (training/README.md) and the config its README resumes it under
-COMMITTED_STATES = {"stage15": "realistic_rig_heavy"}
+COMMITTED_STATES = {"stage16": "realistic_rig_heavier"}
 
 
 def test_every_committed_state_is_listed():
@@ -406,7 +406,7 @@ def test_every_committed_state_is_listed():
 
 @pytest.mark.parametrize("name", sorted(COMMITTED_STATES))
 def test_committed_resumable_state_resumes_under_its_config(tmp_path, name):
-    """training/NAME (stage15: the bundled model's run) resumes under its config with the command
+    """training/NAME (stage16: the run after the bundled model) resumes under its config with the command
     its README gives: its model is the config's, its optimizer loads, and its step is that of the
     last row of its log, or a few steps past it for a run stopped by Ctrl-C."""
     import csv
