@@ -153,9 +153,12 @@ def test_the_no_neutral_ablation_sees_the_same_sources_less_their_neutrals(tmp_p
             if sa.neutral is None:              # canonicalised on its own in both: the same input
                 assert np.array_equal(sa.feat, sb.feat)
     assert any(given) and not all(given)
-    # no share: no draw, so the procedural configs' samples stay as they were
-    none = Trainer(_cfg(False, 0.0), tmp_path / "c", progress=False).pool.sample(3)
-    assert [s.kind for s in none.sources] != [] and all(s.neutral is None for s in none.sources)
+    # no share: no draw and no neutral, with or without the channels (the procedural configs)
+    a, b = (Trainer(_cfg(channels, 0.0), tmp_path / f"c{channels}", progress=False).pool.sample(3)
+            for channels in (True, False))
+    for sa, sb in zip(a.sources, b.sources):
+        assert sa.neutral is None and sb.neutral is None and sa.kind == sb.kind
+        assert np.array_equal(sa.feat, sb.feat) and np.array_equal(sa.weights, sb.weights)
 
 
 def test_neutral_and_no_neutral_configs_differ_from_default_only_in_the_switch():

@@ -115,7 +115,7 @@ def describe_warm_start(init: str, report: dict) -> str:
     started fresh (the fresh ones' module names)."""
     fresh = sorted({name.rsplit(".", 1)[0].split(".")[0] for name in report["fresh"]})
     narrowed = (f"{len(report['narrowed'])} narrowed ({', '.join(report['narrowed'])}), "
-                if report.get("narrowed") else "")
+                if report["narrowed"] else "")
     return (f"warm start from {init}: {len(report['copied'])} tensors copied, "
             f"{len(report['widened'])} widened ({', '.join(report['widened']) or 'none'}), "
             f"{narrowed}{len(report['fresh'])} fresh ({', '.join(fresh) or 'none'})")
