@@ -170,13 +170,17 @@ def test_interrupted_run_resumes_to_the_same_parameters(tmp_path, sig):
     import time
 
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    subprocess.run(_train_cmd(tmp_path / "full"), check=True, env=env, cwd=ROOT, capture_output=True)
-    proc = subprocess.Popen(_train_cmd(tmp_path / "cut", steps=6), env=env, cwd=ROOT,
+    # a tiny step takes ~75 ms: the checkpoint is seen in the first half of the run, so the signal
+    # lands well before its end even when the poll or the machine is slow
+    steps = 40
+    subprocess.run(_train_cmd(tmp_path / "full", steps=steps), check=True, env=env, cwd=ROOT,
+                   capture_output=True)
+    proc = subprocess.Popen(_train_cmd(tmp_path / "cut", steps=steps), env=env, cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     last = tmp_path / "cut" / "last.pt"
     while time.monotonic() < deadline and proc.poll() is None:  # wait for a mid-run checkpoint
-        if last.exists() and 2 <= torch.load(last, weights_only=True)["step"] < 6:
+        if last.exists() and 2 <= torch.load(last, weights_only=True)["step"] < steps // 2:
             break
         time.sleep(0.05)
     assert proc.poll() is None, "the run ended before it could be interrupted"
@@ -185,8 +189,8 @@ def test_interrupted_run_resumes_to_the_same_parameters(tmp_path, sig):
     if sig == "SIGINT":  # Ctrl-C: finishes the step, saves, exits cleanly
         assert proc.returncode == 0 and "Traceback" not in err, err[-2000:]
     stopped_at = torch.load(last, weights_only=True)["step"]
-    assert stopped_at < 6
-    res = subprocess.run(_train_cmd(tmp_path / "cut", extra=("--resume",)), env=env, cwd=ROOT,
+    assert stopped_at < steps
+    res = subprocess.run(_train_cmd(tmp_path / "cut", steps=steps, extra=("--resume",)), env=env, cwd=ROOT,
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr[-2000:]
     assert f"at step {stopped_at}" in res.stdout
@@ -270,7 +274,7 @@ def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_ne
     from data_synth.identity import sample_identity
     from data_synth.rig import build_rig
     from data_synth.tessellate import tessellate
-    from nets.model import NFSConfig, NFSModel
+    from nets.model import NEUTRAL_CHANNEL_DIM, NFSConfig, NFSModel
     from retarget.checkpoint import warm_start
     from retarget.prepare import IMAGE_CHANNELS, prepare_mesh
 
@@ -311,7 +315,7 @@ def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_ne
                                    new.encode_expression(feat, c, ops), rtol=1e-5, atol=1e-5)
         assert not torch.allclose(narrow.encode_expression(feat, c, ops),
                                   new.encode_expression(feat, c, ops,
-                                                        neutral=torch.zeros(feat.shape[0], 7)))
+                                                        neutral=torch.zeros(feat.shape[0], NEUTRAL_CHANNEL_DIM)))
     same = NFSModel(NFSConfig.preset("tiny", decoder_width=16))   # same decoder kind, other widths
     report = warm_start(same, old)
     assert "decoder.0.weight" in report["fresh"] and "decoder.0.weight" not in report["copied"]
