@@ -211,6 +211,26 @@ def rig_loss(model, feat: torch.Tensor, c: torch.Tensor, codes, basis: torch.Ten
     return (err * mean / (size + relative * mean + 1e-12)).mean()
 
 
+#: Canonical units that a skinning descriptor channel's range (0, 1) spans in L_corr: the base
+#: bust in its face frame spans x ±23, y −32..15, z ±10 (the head alone ±8), all well inside it.
+TEMPLATE_SPAN = 72.0
+
+
+def descriptor_template(descriptor: torch.Tensor) -> torch.Tensor:
+    """The template position that descriptor channels (V, 3) in (0, 1) stand for: (V, 3) canonical
+    units, (descriptor − 0.5) · TEMPLATE_SPAN."""
+    return (descriptor - 0.5) * TEMPLATE_SPAN
+
+
+def correspondence_loss(descriptor: torch.Tensor, template: torch.Tensor) -> torch.Tensor:
+    """L_corr (beyond the paper): the first three skinning descriptor channels (V, 3) in (0, 1) read
+    as a position on the template head (``descriptor_template``) against each vertex's true
+    template position (V, 3) (``training_data.template_positions``): squared distance in canonical
+    units², mean over vertices. It makes the descriptor a dense correspondence to one head, so the
+    decoder's M(x) can draw each FACS shape where it belongs on a face it has not seen."""
+    return (descriptor_template(descriptor) - template).pow(2).sum(-1).mean()
+
+
 def segmentation_nll(z_skin: torch.Tensor, labels: torch.Tensor) -> torch.Tensor:
     """L_nll (eq. 2): binary cross-entropy of z_Skin against one-hot segment labels.
 

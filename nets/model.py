@@ -46,8 +46,9 @@ DECODERS = ("mlp", "basis")
 MAX_CONFIG_VALUES = dict(code_dim=2048, image_code_dim=2048, n_facs=2048, image_size=1024,
                          image_channels=16, cnn_width=512, enc_width=2048, enc_blocks=32, k_eig=512,
                          n_segments=256, skin_hidden=2048, skin_layers=32, decoder_width=2048,
-                         decoder_layers=32, norm_groups=512, decoder_fourier=16)
-MIN_CONFIG_VALUES = dict(decoder_fourier=0)   # every other integer field is >= 1
+                         decoder_layers=32, norm_groups=512, decoder_fourier=16,
+                         skin_descriptor=256)
+MIN_CONFIG_VALUES = dict(decoder_fourier=0, skin_descriptor=0)   # every other integer field is >= 1
 #: allowed values of NFSConfig's string fields
 STR_CHOICES = dict(canonical=CANONICAL_FRAMES, decoder=DECODERS)
 
@@ -101,6 +102,12 @@ class NFSConfig:
             its displacement from the source's neutral and the change of its normal, or zeros and
             a flag channel when the neutral is unknown (``NEUTRAL_CHANNEL_DIM``). False = the
             paper's encoder (and every checkpoint saved before the field existed).
+        skin_descriptor: beyond the paper: F extra per-vertex output channels of the skinning
+            encoder, in (0, 1) like z_Skin, that the basis decoder reads with it (its input
+            [v, γ(x), c, z_ID, z_Skin, descriptor]) and nothing else does: a learned description
+            of where on the face each target vertex lies, finer than the L segments, so that
+            M(x) can place each FACS shape on a new identity. 0 = none (every checkpoint saved
+            before the field existed). Needs the basis decoder with skinning.
     """
 
     code_dim: int = 128
@@ -124,6 +131,7 @@ class NFSConfig:
     decoder: str = "mlp"
     decoder_fourier: int = 0
     neutral_channels: bool = False
+    skin_descriptor: int = 0
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -143,6 +151,8 @@ class NFSConfig:
         if self.n_facs > self.code_dim:
             raise ValueError(f"NFSConfig: n_facs ({self.n_facs}) must not exceed code_dim "
                              f"({self.code_dim})")
+        if self.skin_descriptor and (self.decoder != "basis" or not self.use_skinning):
+            raise ValueError("NFSConfig.skin_descriptor needs decoder 'basis' with use_skinning")
         if self.decoder_layers < 2:
             raise ValueError(f"NFSConfig.decoder_layers must be >= 2, got {self.decoder_layers}")
         if not 0.0 <= self.dropout < 1.0:  # NaN too
@@ -242,7 +252,8 @@ class TargetCodes:
 
     Attributes:
         z_id: (code_dim,) identity code z_ID.
-        z_skin: (V, L) skinning feature z_Skin in (0, 1), or None without skinning.
+        z_skin: (V, L [+ F]) skinning feature z_Skin in (0, 1), followed by the F descriptor
+            channels (``NFSConfig.skin_descriptor``), or None without skinning.
         omega_skin: (V, code_dim) skinning weights ω_Skin, cached for all the target's
             expressions; None without skinning, or to have ``local_code`` compute ω_Skin from
             z_skin chunk by chunk (no (V, code_dim) array kept, for huge meshes).
@@ -278,7 +289,8 @@ class NFSModel(nn.Module):
             c_in + NEUTRAL_CHANNEL_DIM * cfg.neutral_channels, cfg.code_dim, cfg.enc_width,
             cfg.enc_blocks, cfg.dropout, outputs="global_mean")
         if cfg.use_skinning:
-            self.skinning_encoder = DiffusionNet(c_in, cfg.n_segments, cfg.enc_width,
+            self.skinning_encoder = DiffusionNet(c_in, cfg.n_segments + cfg.skin_descriptor,
+                                                 cfg.enc_width,
                                                  cfg.enc_blocks, cfg.dropout, outputs="vertices",
                                                  last_activation=torch.sigmoid)
             self.skinning_mlp = mlp([cfg.n_segments]
@@ -287,7 +299,7 @@ class NFSModel(nn.Module):
             dims = [c_in + 2 * cfg.code_dim, 3]
         else:   # [v, γ(x), c, z_ID, z_Skin] -> M(x), code_dim x 3 per vertex
             dims = [c_in + 6 * cfg.decoder_fourier + cfg.code_dim
-                    + cfg.n_segments * cfg.use_skinning, 3 * cfg.code_dim]
+                    + (cfg.n_segments + cfg.skin_descriptor) * cfg.use_skinning, 3 * cfg.code_dim]
         self.decoder = mlp(dims[:1] + [cfg.decoder_width] * (cfg.decoder_layers - 1) + dims[1:],
                            cfg.norm_groups)
 
@@ -349,18 +361,20 @@ class NFSModel(nn.Module):
         return torch.cat([x, neutral], dim=1)
 
     def encode_skinning(self, feat: torch.Tensor, c: torch.Tensor, ops) -> torch.Tensor:
-        """Skinning encoder on a neutral mesh -> z_Skin (V, L) in (0, 1) (sigmoid, for eq. 2 BCE)."""
+        """Skinning encoder on a neutral mesh -> z_Skin (V, L) in (0, 1) (sigmoid, for eq. 2 BCE),
+        followed by the ``cfg.skin_descriptor`` descriptor channels: (V, L + F)."""
         self._require_skinning()
         self._check_features(feat)
         return self._encode(self.skinning_encoder, feat, c, ops)
 
     def skinning_weights(self, z_skin: torch.Tensor) -> torch.Tensor:
-        """Skinning block MLP: z_Skin (V, L) -> ω_Skin (V, code_dim) (no output activation)."""
+        """Skinning block MLP: z_Skin (V, L [+ F]) -> ω_Skin (V, code_dim) (no output activation);
+        it reads the L segment channels only."""
         self._require_skinning()
-        return self.skinning_mlp(z_skin)
+        return self.skinning_mlp(z_skin[..., :self.cfg.n_segments])
 
     def skinning_block(self, z_skin: torch.Tensor, z_ge: torch.Tensor) -> torch.Tensor:
-        """Skinning block Ψ: z_LE = ω_Skin ⊙ z_GE; z_skin (V, L), z_ge (code_dim,) -> (V, code_dim)."""
+        """Skinning block Ψ: z_LE = ω_Skin ⊙ z_GE; z_skin (V, L [+ F]), z_ge (code_dim,) -> (V, code_dim)."""
         return self.skinning_weights(z_skin) * z_ge
 
     def encode_target(self, feat: torch.Tensor, c: torch.Tensor, ops, basis: bool = True,
@@ -456,7 +470,8 @@ class NFSModel(nn.Module):
             z_code: (V, code_dim) z_LE, or (code_dim,) z_GE broadcast to all rows (no skinning).
             chunk: decode at most this many vertices at a time; the same result, and under
                 ``torch.no_grad`` the working memory is that of one chunk.
-            z_skin: (V, L) z_Skin of these rows: read by the basis decoder with skinning only.
+            z_skin: (V, L [+ F]) z_Skin of these rows (with the descriptor channels): read by the
+                basis decoder with skinning only.
         Returns:
             (V, 3) float32 displacement Δv in the units of ``feat``'s positions.
         """
@@ -471,7 +486,7 @@ class NFSModel(nn.Module):
                     z_skin: torch.Tensor | None = None) -> torch.Tensor:
         """``decode`` for S expressions of one target in one pass: z_codes (S, V, code_dim) z_LE or
         (S, code_dim) z_GE broadcast to all rows -> Δv (S, V, 3); ``chunk`` bounds the rows per
-        pass (working memory S x chunk rows); ``z_skin`` (V, L) as in ``decode``.
+        pass (working memory S x chunk rows); ``z_skin`` (V, L [+ F]) as in ``decode``.
 
         The first linear layer is applied by parts: its columns for c and z_ID, the same for every
         row, are folded into a bias once per call, which removes 2/3 of that layer's work per row
@@ -544,7 +559,7 @@ class NFSModel(nn.Module):
                 codes and operators.
             vertex_subset: (n,) int64 target vertex indices to decode, or None for all V.
         Returns:
-            dict with z_ID (code_dim,), z_Skin (V, L) | None, z_GE (S, code_dim),
+            dict with z_ID (code_dim,), z_Skin (V, L [+ F]) | None, z_GE (S, code_dim),
             z_LE (S, n, code_dim) | None, dv (S, n, 3).
         """
         if not len(src_feats) == len(src_cs) == len(src_ops) >= 1:
@@ -567,7 +582,7 @@ class NFSModel(nn.Module):
                      vertex_subset: torch.Tensor | None = None) -> dict[str, torch.Tensor | None]:
         """Retarget one source mesh onto one target: ``forward_group`` with S = 1, squeezed.
 
-        Returns dict with z_ID (code_dim,), z_GE (code_dim,), z_Skin (V, L) | None,
+        Returns dict with z_ID (code_dim,), z_GE (code_dim,), z_Skin (V, L [+ F]) | None,
         z_LE (n, code_dim) | None, dv (n, 3).
         """
         out = self.forward_group(tgt_feat, tgt_c, tgt_ops, [src_feat], [src_c], [src_ops],

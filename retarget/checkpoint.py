@@ -152,6 +152,21 @@ def _embed(src: torch.Tensor, dst: torch.Tensor, zero: bool) -> None:
     dst[tuple(slice(0, n) for n in src.shape)] = src
 
 
+#: What ``NFSConfig.skin_descriptor`` widens, and along which dim: the skinning encoder's last
+#: layer gains F output rows and the decoder's first layer F input columns after z_Skin, all at
+#: zero: the new channels start at sigmoid(0) = 0.5 everywhere and the decoder ignores them, so the
+#: model computes what it did. L_corr moves the rows first (unbounded random rows saturate the
+#: sigmoid), the decoder's columns follow from L_rig and L_dec.
+DESCRIPTOR_TENSORS = {"skinning_encoder.last.weight": 0, "skinning_encoder.last.bias": 0,
+                      "decoder.0.weight": 1}
+
+
+def widens_descriptor(src: torch.Tensor, dst: torch.Tensor, dim: int) -> bool:
+    """Whether ``dst`` is ``src`` with more rows (dim 0) or columns (dim 1), nothing else changed."""
+    return (src.dim() == dst.dim() and src.shape[dim] < dst.shape[dim]
+            and all(a == b for i, (a, b) in enumerate(zip(src.shape, dst.shape)) if i != dim))
+
+
 def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                ) -> dict[str, list[str]]:
     """Copy into ``model`` the weights of ``initial``, a model of another config (a new design
@@ -168,7 +183,10 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
     unknown, goes into the bias: the narrowed encoder computes what the old one did without the
     neutral (``narrowed`` in the report). The three DiffusionNet encoders of a
     larger ``enc_width`` (the same number of blocks) are widened the same way
-    (``widen_encoder_tensor``). Everything else keeps its fresh
+    (``widen_encoder_tensor``). A model with more skinning descriptor channels
+    (``NFSConfig.skin_descriptor``) takes the old rows and columns of ``DESCRIPTOR_TENSORS``;
+    its decoder reads the new channels through zero columns, so it computes what the old model
+    did. Everything else keeps its fresh
     initialisation, except a fresh decoder's last layer, which starts at zero: the warm-started
     model first predicts no displacement (doing nothing) rather than a random field whose large
     first gradients would pull the copied encoders around.
@@ -203,6 +221,10 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                   and src.shape[1] == tensor.shape[1] + NEUTRAL_CHANNEL_DIM):
                 tensor.copy_(src[:, :tensor.shape[1]])
                 report["narrowed"].append(name)
+            elif (name in DESCRIPTOR_TENSORS
+                  and widens_descriptor(src, tensor, DESCRIPTOR_TENSORS[name])):
+                _embed(src, tensor, zero=True)
+                report["widened"].append(name)
             elif (name.split(".")[0] in ENCODERS and widths[0] < widths[1]
                   and model.cfg.enc_blocks == initial.cfg.enc_blocks):
                 widen_encoder_tensor(name.split(".", 1)[1], src, tensor, *widths)

@@ -59,7 +59,9 @@ DEFAULTS = {
     "loss": {"lambda_v": 10.0, "lambda_n": 1.0, "lambda_g": 1.0, "id": 1.0, "exp": 1.0,
              "bp": 1.0, "br": 1.0, "nll": 1.0, "rig": 0.0, "free_dims_dropout": 0.0,
              # L_rig relative to each shape's size (nets.losses.rig_loss's τ; 0 = plain)
-             "rig_relative": 0.0},
+             "rig_relative": 0.0,
+             # L_corr: skinning descriptor channels 0-2 as template positions (realistic heads)
+             "corr": 0.0},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
     "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
               "ckpt_minutes": 5.0,
@@ -221,7 +223,7 @@ def free_dims_dropout(z_ge: torch.Tensor, n_facs: int, p: float, rng: np.random.
 
 #: The encoder and segmentation terms added to L_dec, in this order, with their config weights.
 LOSS_WEIGHTS = (("L_ID", "id"), ("L_Exp", "exp"), ("L_BP", "bp"), ("L_BR", "br"), ("L_nll", "nll"),
-                ("L_rig", "rig"))
+                ("L_rig", "rig"), ("L_corr", "corr"))
 
 #: Shapes per step that L_rig decodes with the MLP decoder (one decoder pass each); the basis
 #: decoder's rig holds all 53 at no extra cost.
@@ -244,7 +246,8 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
 
     On a user rig (``training_data.RigPool``) L_ID is left out when the target has no identity
     coefficients, L_nll when it has no segment labels, and L_Exp / L_BR supervise only the shapes
-    the rig has (``Entry.present``)."""
+    the rig has (``Entry.present``). L_corr needs a model with skinning descriptor channels and a
+    realistic head target (``Entry.template``)."""
     tgt = group.target
     t_feat, t_img, t_ops = tgt.mesh.torch_inputs(device)
     images = torch.from_numpy(np.stack([tgt.mesh.image] + [s.image for s in group.sources]))
@@ -288,9 +291,13 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
         shapes = rig_shapes(model, tgt.present, rng).to(device)
         out["L_rig"] = L.rig_loss(model, t_feat, c_t, codes, basis_t, rows, shapes,
                                   loss_cfg["rig_relative"])
+    n_seg = model.cfg.n_segments
+    if loss_cfg["corr"] > 0 and model.cfg.skin_descriptor >= 3 and tgt.template is not None:
+        out["L_corr"] = L.correspondence_loss(codes.z_skin[:, n_seg:n_seg + 3],
+                                              torch.from_numpy(tgt.template).to(device))
     if codes.z_skin is not None and tgt.rig.segments is not None:
         labels = torch.from_numpy(tgt.rig.segments).to(device)
-        out["L_nll"] = L.segmentation_nll(codes.z_skin, labels)
+        out["L_nll"] = L.segmentation_nll(codes.z_skin[:, :n_seg], labels)
     total = out["L_dec"]
     for term, weight in LOSS_WEIGHTS:
         if term in out:
@@ -339,7 +346,8 @@ def learning_rate(progress: float, step: int, optim_cfg: dict) -> float:
 
 
 LOG_COLUMNS = ("step", "elapsed_s", "lr", "samples_per_s", "total", "L_dec", "L_v", "L_n", "L_g",
-               "L_ID", "L_Exp", "L_BP", "L_BR", "L_nll", "L_rig", "val_mse_mm2", "val_seg_mse_mm2",
+               "L_ID", "L_Exp", "L_BP", "L_BR", "L_nll", "L_rig", "L_corr", "val_mse_mm2",
+               "val_seg_mse_mm2",
                "val_weight_mae")
 
 

@@ -22,6 +22,7 @@ same groups drawn from that rig (self-retargeting only), mixed with procedural o
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -45,12 +46,16 @@ class Entry:
     rig: the procedural rig (cm), or a ``user_rig.UserRig``. mesh: its neutral prepared in the
     canonical frame. basis: (53,V,3) float32 blendshape deltas in canonical units
     (rig.deltas · canon.scale). present: (53,) bool, the shapes the rig has (None = all 53).
+    template: (V,3) float32, for a realistic head the point of the MakeHuman base bust each vertex
+    lies on, in the base's own face frame (canonical units; ``template_positions``), the target of
+    L_corr; None for rigs without that correspondence.
     """
 
     rig: Rig
     mesh: PreparedMesh
     basis: np.ndarray
     present: np.ndarray | None = None
+    template: np.ndarray | None = None
 
 
 @dataclass
@@ -77,12 +82,33 @@ class Group:
     gt_dv: np.ndarray
 
 
+@lru_cache(maxsize=1)
+def base_template() -> np.ndarray:
+    """(5472,3) float32: the MakeHuman base bust's neutral in its own face frame (canonical units)."""
+    from data_synth.makehuman import assets
+
+    z = assets.heads()
+    canon = Canonicaliser.fit(z["bust_neutral"], "MakeHuman base bust", kind="face",
+                              faces=z["bust_faces"])
+    return canon.to_canonical(z["bust_neutral"]).astype(np.float32)
+
+
+def template_positions(rig) -> np.ndarray | None:
+    """(V,3) float32 ``Entry.template`` of a realistic head rig (its ``correspondence``, (V, 5472)
+    rows of base bust vertex weights, applied to ``base_template``); None for other rigs."""
+    corr = getattr(rig, "correspondence", None)
+    if corr is None:
+        return None
+    return np.asarray(corr @ base_template(), np.float32)
+
+
 def prepare_rig(rig, model_cfg) -> Entry:
-    """Prepare a rig's neutral for the network: an ``Entry`` with its canonical basis."""
+    """Prepare a rig's neutral for the network: an ``Entry`` with its canonical basis (and, for a
+    realistic head, its template positions)."""
     mesh = prepare_mesh(rig.neutral, rig.faces, model_cfg.k_eig, model_cfg.image_size,
                         IMAGE_CHANNELS[model_cfg.image_channels], canonical=model_cfg.canonical)
     return Entry(rig, mesh, (rig.deltas * mesh.canon.scale).astype(np.float32),
-                 getattr(rig, "present", None))
+                 getattr(rig, "present", None), template_positions(rig))
 
 
 def prepare_entry(identity: np.ndarray, tess_spec: dict, tess_seed: int, model_cfg,

@@ -270,13 +270,23 @@ def test_free_dims_dropout_zeroes_the_dims_past_the_weights_of_some_sources():
     assert (free_dims_dropout(z, 53, 1.0, np.random.default_rng(1))[:, 53:] == 0).all()
 
 
-def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_new_decoder(tmp_path):
+def small_head(cfg):
+    """A 300-vertex procedural test head prepared for a model of ``cfg``: (rig, PreparedMesh,
+    (feat, img, ops) torch inputs on the CPU)."""
     from data_synth.identity import sample_identity
     from data_synth.rig import build_rig
     from data_synth.tessellate import tessellate
+    from retarget.prepare import IMAGE_CHANNELS, prepare_mesh
+
+    rig = build_rig(sample_identity(0, split="test"), tessellate(n_vertices=300, kind="regular"))
+    mesh = prepare_mesh(rig.neutral, rig.faces, cfg.k_eig, cfg.image_size,
+                        IMAGE_CHANNELS[cfg.image_channels])
+    return rig, mesh, mesh.torch_inputs("cpu")
+
+
+def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_new_decoder(tmp_path):
     from nets.model import NEUTRAL_CHANNEL_DIM, NFSConfig, NFSModel
     from retarget.checkpoint import warm_start
-    from retarget.prepare import IMAGE_CHANNELS, prepare_mesh
 
     torch.manual_seed(0)
     old = NFSModel(NFSConfig.preset("tiny"))
@@ -289,11 +299,8 @@ def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_ne
     assert torch.equal(new.identity_encoder.last.weight, old.identity_encoder.last.weight)
     assert torch.equal(new.cnn.state_dict()[next(iter(new.cnn.state_dict()))],
                        old.cnn.state_dict()[next(iter(old.cnn.state_dict()))])
-    rig = build_rig(sample_identity(0, split="test"), tessellate(n_vertices=300, kind="regular"))
     cfg = old.cfg
-    mesh = prepare_mesh(rig.neutral, rig.faces, cfg.k_eig, cfg.image_size,
-                        IMAGE_CHANNELS[cfg.image_channels])
-    feat, img, ops = mesh.torch_inputs("cpu")
+    rig, mesh, (feat, img, ops) = small_head(cfg)
     with torch.no_grad():
         c = old.image_code(img)[0]
         assert torch.equal(new.image_code(img)[0], c)
@@ -323,12 +330,9 @@ def test_warm_start_copies_what_fits_widens_the_expression_input_and_zeroes_a_ne
 
 
 def test_warm_start_widens_the_encoders_without_changing_what_they_compute():
-    from data_synth.identity import sample_identity
-    from data_synth.rig import build_rig
-    from data_synth.tessellate import tessellate
     from nets.model import NFSConfig, NFSModel
     from retarget.checkpoint import warm_start
-    from retarget.prepare import IMAGE_CHANNELS, neutral_channels, prepare_mesh
+    from retarget.prepare import neutral_channels
 
     torch.manual_seed(0)
     old = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2, neutral_channels=True))
@@ -340,11 +344,8 @@ def test_warm_start_widens_the_encoders_without_changing_what_they_compute():
     assert {n.split(".")[0] for n in report["widened"]} == {"identity_encoder", "expression_encoder",
                                                             "skinning_encoder"}
     assert new.expression_encoder.first.weight.shape[0] == 24
-    rig = build_rig(sample_identity(0, split="test"), tessellate(n_vertices=300, kind="regular"))
     cfg = old.cfg
-    mesh = prepare_mesh(rig.neutral, rig.faces, cfg.k_eig, cfg.image_size,
-                        IMAGE_CHANNELS[cfg.image_channels])
-    feat, img, ops = mesh.torch_inputs("cpu")
+    rig, mesh, (feat, img, ops) = small_head(cfg)
     frame = mesh.canon.to_canonical(rig.evaluate(np.full(53, 0.3))).astype(np.float32)
     channels = torch.from_numpy(neutral_channels(frame, mesh.vertices, mesh.faces))
     with torch.no_grad():
@@ -359,6 +360,55 @@ def test_warm_start_widens_the_encoders_without_changing_what_they_compute():
     new.zero_grad()
     new.encode_expression(feat, c, ops).square().sum().backward()
     assert new.expression_encoder.first.weight.grad[16:].abs().sum() > 0
+
+
+def test_warm_start_adds_skinning_descriptor_channels_the_decoder_then_learns_to_read(tmp_path):
+    from nets.losses import rig_loss
+    from nets.model import NFSConfig, NFSModel
+    from retarget.checkpoint import warm_start
+
+    with pytest.raises(ValueError, match="skin_descriptor needs decoder 'basis'"):
+        NFSConfig.preset("tiny", skin_descriptor=4)
+    torch.manual_seed(0)
+    old = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2))
+    with torch.no_grad():
+        old.decoder[-1].weight.normal_(0, 0.1)        # as if trained: the rig is not zero
+    new = NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2, skin_descriptor=5))
+    report = warm_start(new, old)
+    assert sorted(report["widened"]) == ["decoder.0.weight", "skinning_encoder.last.bias",
+                                         "skinning_encoder.last.weight"] and not report["fresh"]
+    assert torch.count_nonzero(new.decoder[0].weight[:, -5:]) == 0
+    assert torch.count_nonzero(new.skinning_encoder.last.weight[old.cfg.n_segments:]) == 0
+    cfg = old.cfg
+    rig, mesh, (feat, img, ops) = small_head(cfg)
+    with torch.no_grad():
+        c = old.image_code(img)[0]
+        a, b = old.encode_target(feat, c, ops), new.encode_target(feat, c, ops)
+        assert b.z_skin.shape == (feat.shape[0], cfg.n_segments + 5)
+        torch.testing.assert_close(b.z_skin[:, :cfg.n_segments], a.z_skin)   # the segments kept
+        torch.testing.assert_close(b.omega_skin, a.omega_skin)
+        torch.testing.assert_close(b.basis, a.basis, rtol=1e-5, atol=1e-6)   # the same rig
+        assert b.basis.abs().max() > 0
+        assert torch.equal(b.z_skin[:, cfg.n_segments:], torch.full_like(b.z_skin[:, cfg.n_segments:], 0.5))
+    # L_rig reaches the new channels: the decoder's new columns and the encoder's new rows
+    basis = torch.from_numpy((rig.deltas * mesh.canon.scale).astype(np.float32))
+    codes = new.encode_target(feat, c, ops, basis=False)
+    rig_loss(new, feat, c, codes, basis).backward()
+    assert new.decoder[0].weight.grad[:, -5:].abs().sum() > 0
+    new.zero_grad()
+    with torch.no_grad():
+        new.decoder[0].weight[:, -5:].normal_()
+    rig_loss(new, feat, c, new.encode_target(feat, c, ops, basis=False), basis).backward()
+    assert new.skinning_encoder.last.weight.grad[cfg.n_segments:].abs().sum() > 0
+    # a run of that design trains (L_nll on the segment channels only) and resumes from its file
+    run_cfg = tiny_cfg(steps=2)
+    run_cfg["model"] = {"preset": "tiny", "decoder": "basis", "skin_descriptor": 3}
+    Trainer(run_cfg, tmp_path / "run", progress=False).run()
+    log = (tmp_path / "run" / "train_log.csv").read_text().splitlines()
+    header, last = log[0].split(","), log[-1].split(",")
+    assert np.isfinite(float(last[header.index("L_nll")]))
+    from retarget.checkpoint import model_from_checkpoint
+    assert model_from_checkpoint(load_checkpoint(tmp_path / "run" / "model.pt")).cfg.skin_descriptor == 3
 
 
 def test_warm_start_can_start_named_modules_fresh_where_they_fit():
@@ -410,7 +460,7 @@ def test_every_committed_state_is_listed():
 
 @pytest.mark.parametrize("name", sorted(COMMITTED_STATES))
 def test_committed_resumable_state_resumes_under_its_config(tmp_path, name):
-    """training/NAME (stage16: the run after the bundled model) resumes under its config with the command
+    """training/NAME (stage16: the bundled model's run) resumes under its config with the command
     its README gives: its model is the config's, its optimizer loads, and its step is that of the
     last row of its log, or a few steps past it for a run stopped by Ctrl-C."""
     import csv

@@ -103,7 +103,7 @@ def test_shipped_mix_configs_load():
 def _without(cfg: dict, section: str, key: str) -> dict:
     """A copy of ``cfg`` with ``cfg[section][key]`` removed."""
     out = {k: dict(v) if isinstance(v, dict) else v for k, v in cfg.items()}
-    out[section].pop(key)
+    out[section].pop(key, None)
     return out
 
 
@@ -156,3 +156,59 @@ def test_heavy_no_neutral_ablation_differs_from_the_bundled_config_only_in_the_e
     ablation = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy_no_neutral.yaml")
     assert (heavy["model"]["neutral_channels"], ablation["model"]["neutral_channels"]) == (True, False)
     assert _without(ablation, "model", "neutral_channels") == _without(heavy, "model", "neutral_channels")
+
+
+def test_descriptor_configs_change_only_the_descriptor_and_l_corr():
+    """realistic_rig_descriptor.yaml adds 16 skinning descriptor channels to realistic_rig_heavier;
+    realistic_rig_corr.yaml adds L_corr to that."""
+    heavier = load_config(ROOT / "configs" / "train" / "realistic_rig_heavier.yaml")
+    desc = load_config(ROOT / "configs" / "train" / "realistic_rig_descriptor.yaml")
+    corr = load_config(ROOT / "configs" / "train" / "realistic_rig_corr.yaml")
+    assert (heavier["model"].get("skin_descriptor", 0), desc["model"]["skin_descriptor"]) == (0, 16)
+    assert _without(desc, "model", "skin_descriptor") == _without(heavier, "model", "skin_descriptor")
+    assert (desc["loss"]["corr"], corr["loss"]["corr"]) == (0.0, 0.05)
+    assert _without(corr, "loss", "corr") == _without(desc, "loss", "corr")
+
+
+def test_realistic_targets_carry_their_template_positions_and_l_corr_trains_on_them():
+    import torch
+    from nets.losses import TEMPLATE_SPAN, correspondence_loss
+    from retarget.train import group_losses, model_cfg
+    from retarget.training_data import base_template, template_positions
+
+    cfg = mix_cfg(0.5)
+    cfg["model"] = {"preset": "tiny", "decoder": "basis", "skin_descriptor": 4}
+    pool = TargetPool(cfg["data"], model_cfg(cfg), seed=0)
+    groups = (pool.sample(i) for i in range(200))
+    real = proc = None
+    while real is None or proc is None:
+        g = next(groups)
+        if g.target.rig.correspondence is None:
+            proc = proc or g
+        else:
+            real = real or g
+    assert proc.target.template is None
+    t = real.target.template
+    assert t.shape == (len(real.target.rig.neutral), 3)
+    np.testing.assert_allclose(t, real.target.rig.correspondence @ base_template(), atol=1e-4)
+    # the template is the base bust in its own face frame: the head about 16 units wide
+    head = base_template()[:4326]
+    assert 12 < head[:, 0].max() - head[:, 0].min() < 20
+    exact = torch.from_numpy(0.5 + t / TEMPLATE_SPAN)
+    assert float(correspondence_loss(exact, torch.from_numpy(t))) < 1e-8
+    assert float(correspondence_loss(exact + 0.01, torch.from_numpy(t))) > 0.1
+    assert template_positions(proc.target.rig) is None
+
+    from nets.model import NFSModel
+    torch.manual_seed(0)
+    model = NFSModel(model_cfg(cfg))
+    loss_cfg = {**load_config(ROOT / "configs" / "train" / "tiny.yaml")["loss"], "corr": 1.0}
+    rng = np.random.default_rng(0)
+    out = group_losses(model, real, loss_cfg, 200, rng, "cpu")
+    assert torch.isfinite(out["L_corr"]) and out["L_corr"] > 0
+    out["L_corr"].backward()
+    grad = model.skinning_encoder.last.weight.grad
+    assert grad[model.cfg.n_segments:model.cfg.n_segments + 3].abs().sum() > 0   # channels 0-2 train
+    assert grad[model.cfg.n_segments + 3:].abs().sum() == 0                      # the others do not
+    assert "L_corr" not in group_losses(model, proc, loss_cfg, 200, rng, "cpu")
+    assert "L_corr" not in group_losses(model, real, {**loss_cfg, "corr": 0.0}, 200, rng, "cpu")
