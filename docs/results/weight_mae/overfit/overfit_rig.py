@@ -15,7 +15,10 @@ Arms (--train): "all" = every parameter; "decoder" = the decoder MLP only (targe
 skinning block frozen). --unstyled takes the fitted identities' shapes as authored instead of with
 the random per-rig style that training rigs get (``data_synth.makehuman.expressions.style_shapes``).
 --descriptor F warm-starts a model with F skinning descriptor channels (``NFSConfig.skin_descriptor``,
-zero decoder columns: the same model at step 0). --steps 0 only measures.
+zero decoder columns: the same model at step 0). --oracle-template (with --descriptor ≥ 3) puts each
+head's true template positions (``training_data.template_positions``) into the first three
+descriptor channels instead of the encoder's: how far the rig gets with a perfect correspondence.
+--steps 0 only measures.
 
   OMP_NUM_THREADS=1 python docs/results/weight_mae/overfit/overfit_rig.py --train all --lr 1e-3 --steps 600 --identities 7
 """
@@ -30,7 +33,7 @@ import numpy as np
 import torch
 
 from data_synth.makehuman import base_head_rig, build_head_rig, head_tessellation, sample_head_identity
-from nets.losses import rig_loss
+from nets.losses import TEMPLATE_SPAN, rig_loss
 from nets.model import NFSModel
 from retarget.checkpoint import load_checkpoint, model_from_checkpoint, warm_start
 from retarget.training_data import prepare_rig
@@ -45,8 +48,27 @@ def head_entry(model, seed: int, split: str, style: bool, tess: dict):
                        model.cfg)
 
 
+def use_true_template(model) -> dict:
+    """Make ``model.encode_skinning`` write the true template positions of ``holder["entry"]`` into
+    descriptor channels 0-2 (as (0, 1) values, ``nets.losses.descriptor_template``'s inverse)."""
+    holder, n_seg, encode = {}, model.cfg.n_segments, model.encode_skinning
+
+    def encode_skinning(feat, c, ops):
+        z = encode(feat, c, ops)
+        t = torch.from_numpy(0.5 + holder["entry"].template / TEMPLATE_SPAN).to(z)
+        return torch.cat([z[:, :n_seg], t, z[:, n_seg + 3:]], dim=1)
+
+    model.encode_skinning = encode_skinning
+    return holder
+
+
+ORACLE: dict | None = None   # set by --oracle-template: the entry whose template is used
+
+
 def median_error(model, entry) -> float:
     """Median over the shapes the rig has (|B_k| > 0) of |B̂_k − B_k| / |B_k|."""
+    if ORACLE is not None:
+        ORACLE["entry"] = entry
     t_feat, t_img, t_ops = entry.mesh.torch_inputs("cpu")
     basis = torch.from_numpy(entry.basis)
     with torch.no_grad():
@@ -72,6 +94,10 @@ def main():
     ap.add_argument("--descriptor", type=int, default=0,
                     help="warm-start a model with this many skinning descriptor channels "
                          "(NFSConfig.skin_descriptor) from the checkpoint")
+    ap.add_argument("--oracle-template", action="store_true",
+                    help="the true template positions in descriptor channels 0-2 (needs --descriptor >= 3)")
+    ap.add_argument("--batch", type=int, default=1,
+                    help="heads per optimizer step (L_rig averaged over them; the training run has 1)")
     ap.add_argument("--tau", type=float, default=0.05)
     ap.add_argument("--out", default=None, help="write the curve as JSON here")
     args = ap.parse_args()
@@ -83,6 +109,11 @@ def main():
         wide = NFSModel(dataclasses.replace(model.cfg, skin_descriptor=args.descriptor))
         warm_start(wide, model)
         model = wide
+    if args.oracle_template:
+        if args.descriptor < 3:
+            raise SystemExit("--oracle-template needs --descriptor 3 or more")
+        global ORACLE
+        ORACLE = use_true_template(model)
     kind, n, crop = args.tessellation.split(":")
     fit = [head_entry(model, i, "train", not args.unstyled,
                       {"n_vertices": int(n), "kind": kind, "crop": crop, "seed": 3})
@@ -118,15 +149,18 @@ def main():
             model.train()
         if step == args.steps:
             break
-        entry = fit[step % len(fit)]
-        t_feat, t_img, t_ops = entry.mesh.torch_inputs("cpu")
-        c_t = model.image_code(t_img)[0]
-        codes = model.encode_target(t_feat, c_t, t_ops, basis=False)
-        present = np.ones(53, bool) if entry.present is None else entry.present
-        loss = rig_loss(model, t_feat, c_t, codes, torch.from_numpy(entry.basis), None,
-                        torch.from_numpy(np.flatnonzero(present)), args.tau)
         opt.zero_grad()
-        loss.backward()
+        for b in range(args.batch):
+            entry = fit[(step * args.batch + b) % len(fit)]
+            if ORACLE is not None:
+                ORACLE["entry"] = entry
+            t_feat, t_img, t_ops = entry.mesh.torch_inputs("cpu")
+            c_t = model.image_code(t_img)[0]
+            codes = model.encode_target(t_feat, c_t, t_ops, basis=False)
+            present = np.ones(53, bool) if entry.present is None else entry.present
+            loss = rig_loss(model, t_feat, c_t, codes, torch.from_numpy(entry.basis), None,
+                            torch.from_numpy(np.flatnonzero(present)), args.tau)
+            (loss / args.batch).backward()
         opt.step()
     if args.out:
         with open(args.out, "w") as f:
