@@ -46,6 +46,9 @@ DEFAULTS = {
         "weights": "mixed", "sources_per_target": 4, "decode_faces": 1000,
         "augment": {"rotate_deg": 3.0, "scale": 0.05, "translate": 0.5},
         "val_identities": 4, "val_expressions": 4,
+        # heads L_rig draws its rig on each step: the group's target and rig_targets - 1 more of
+        # the pool (TargetPool only; a user rig's groups keep one)
+        "rig_targets": 1,
         "rig": None, "keep_vertices": None, "rig_mix": 0.5, "rig_strict": False,
         "source_neutral_share": 0.5,  # sources given their neutral (neutral-aware models only)
         # shares of the two rig sources among the pool's identities (training_data.TargetPool)
@@ -108,6 +111,7 @@ VALUE_RULES = {
     ("data", "pool_refresh"): (int, 1, None, True), ("data", "sources_per_target"): (int, 1, None, True),
     ("data", "decode_faces"): (int, 0, None, True), ("data", "rig_mix"): (float, 0.0, 1.0, True),
     ("data", "val_identities"): (int, 1, None, True), ("data", "val_expressions"): (int, 1, None, True),
+    ("data", "rig_targets"): (int, 1, 64, True),
     **{("loss", k): (float, 0.0, None, True) for k in DEFAULTS["loss"]},
 }
 
@@ -240,6 +244,19 @@ def rig_shapes(model: NFSModel, present: np.ndarray | None, rng: np.random.Gener
     return torch.from_numpy(have.astype(np.int64))
 
 
+def extra_rig_loss(model: NFSModel, entry, loss_cfg: dict, n_faces: int,
+                   rng: np.random.Generator, device) -> torch.Tensor:
+    """L_rig (scalar, canonical units²) on one more head of the pool (``Group.rig_targets``):
+    its own target codes, decoded on ``n_faces`` random faces like the group's target."""
+    feat, img, ops = entry.mesh.torch_inputs(device)
+    c = model.image_code(img)[0]
+    codes = model.encode_target(feat, c, ops)
+    rows = torch.from_numpy(face_subset(entry.mesh.faces, n_faces, rng)[0]).to(device)
+    shapes = rig_shapes(model, entry.present, rng).to(device)
+    return L.rig_loss(model, feat, c, codes, torch.from_numpy(entry.basis).to(device), rows, shapes,
+                      loss_cfg["rig_relative"])
+
+
 def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
                  rng: np.random.Generator, device) -> dict[str, torch.Tensor]:
     """All NFS losses (eq. 2-9) of one training group; returns named scalars and ``total``.
@@ -289,8 +306,9 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
     out["L_BR"] = L.blendshape_reconstruction_loss(model, t_feat, c_t, codes, z_br, basis_t, rows)
     if loss_cfg["rig"] > 0:
         shapes = rig_shapes(model, tgt.present, rng).to(device)
-        out["L_rig"] = L.rig_loss(model, t_feat, c_t, codes, basis_t, rows, shapes,
-                                  loss_cfg["rig_relative"])
+        rig = [L.rig_loss(model, t_feat, c_t, codes, basis_t, rows, shapes, loss_cfg["rig_relative"])]
+        rig += [extra_rig_loss(model, e, loss_cfg, n_faces, rng, device) for e in group.rig_targets]
+        out["L_rig"] = torch.stack(rig).mean()   # the mean over the step's heads
     n_seg = model.cfg.n_segments
     if loss_cfg["corr"] > 0 and model.cfg.skin_descriptor >= 3 and tgt.template is not None:
         out["L_corr"] = L.correspondence_loss(codes.z_skin[:, n_seg:n_seg + 3],

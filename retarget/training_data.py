@@ -75,11 +75,14 @@ class Source:
 
 @dataclass
 class Group:
-    """One target neutral and S sources. gt_dv: (S,V,3) canonical target displacements w·B_tgt."""
+    """One target neutral and S sources. gt_dv: (S,V,3) canonical target displacements w·B_tgt.
+    rig_targets: more heads of the pool on which L_rig also draws the FACS shapes this step
+    (``data.rig_targets`` − 1 of them; none by default)."""
 
     target: Entry
     sources: list[Source]
     gt_dv: np.ndarray
+    rig_targets: tuple[Entry, ...] = ()
 
 
 @lru_cache(maxsize=1)
@@ -259,7 +262,12 @@ class TargetPool:
                     w *= present
             sources.append(make_source(entry, w, kind, rng, self.cfg.get("augment", {}),
                                        self.model_cfg, self.cfg.get("source_neutral_share", 0.0)))
-        return Group(target, sources, ground_truth(weights, target))
+        # drawn last, so that the rest of the group does not depend on data.rig_targets
+        extra = []
+        for _ in range(int(self.cfg.get("rig_targets", 1)) - 1):
+            other = (t_slot + 1 + int(rng.integers(size - 1))) % size if size > 1 else t_slot
+            extra.append(self.slot(other, step)[int(rng.integers(2))])
+        return Group(target, sources, ground_truth(weights, target), tuple(extra))
 
 
 def ground_truth(weights: np.ndarray, target: Entry) -> np.ndarray:

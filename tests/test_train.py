@@ -257,6 +257,32 @@ def test_rig_loss_term_reaches_the_decoder_and_decodes_the_rigs_shapes_only(tmp_
     assert len(drawn) == RIG_SHAPES_MLP == len(set(drawn.tolist()))
 
 
+def test_rig_targets_add_other_heads_to_l_rig_and_leave_the_rest_of_the_group(tmp_path):
+    from retarget.train import extra_rig_loss
+    cfg = tiny_cfg()
+    one = Trainer(cfg, tmp_path / "one", progress=False).pool.sample(3)
+    cfg["data"]["rig_targets"] = 3
+    trainer = Trainer(cfg, tmp_path / "three", progress=False)
+    group = trainer.pool.sample(3)
+    assert one.rig_targets == () and len(group.rig_targets) == 2
+    assert all(e is not group.target for e in group.rig_targets)
+    assert np.array_equal(group.target.basis, one.target.basis)
+    assert np.array_equal(group.gt_dv, one.gt_dv)   # the sources and their ground truth unchanged
+    loss_cfg = {**cfg["loss"], "rig": 10.0}
+    with_extra = group_losses(trainer.model, group, loss_cfg, 200, np.random.default_rng(0), "cpu")
+    alone = group_losses(trainer.model, one, loss_cfg, 200, np.random.default_rng(0), "cpu")
+    assert torch.allclose(with_extra["L_v"], alone["L_v"])
+    extras = [extra_rig_loss(trainer.model, e, loss_cfg, 200, np.random.default_rng(1), "cpu")
+              for e in group.rig_targets]
+    assert all(torch.isfinite(x) and x > 0 for x in extras)
+    # the mean over the three heads: the extra heads move L_rig
+    assert not torch.allclose(with_extra["L_rig"], alone["L_rig"])
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"base: {TINY}\ndata: {{rig_targets: 0}}\n")
+    with pytest.raises(RetargetError, match="rig_targets"):
+        load_config(bad)
+
+
 def test_free_dims_dropout_zeroes_the_dims_past_the_weights_of_some_sources():
     from retarget.train import free_dims_dropout
     z = torch.rand(400, 128, requires_grad=True)
@@ -460,7 +486,7 @@ def test_every_committed_state_is_listed():
 
 @pytest.mark.parametrize("name", sorted(COMMITTED_STATES))
 def test_committed_resumable_state_resumes_under_its_config(tmp_path, name):
-    """training/NAME (stage16: the bundled model's run) resumes under its config with the command
+    """training/NAME (stage17: the bundled model's run) resumes under its config with the command
     its README gives: its model is the config's, its optimizer loads, and its step is that of the
     last row of its log, or a few steps past it for a run stopped by Ctrl-C."""
     import csv
