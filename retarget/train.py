@@ -47,7 +47,7 @@ DEFAULTS = {
         "augment": {"rotate_deg": 3.0, "scale": 0.05, "translate": 0.5},
         "val_identities": 4, "val_expressions": 4,
         # heads L_rig draws its rig on each step: the group's target and rig_targets - 1 more of
-        # the pool (TargetPool only; a user rig's groups keep one)
+        # the pool (TargetPool's groups; those drawn from a user rig, data.rig, keep one)
         "rig_targets": 1,
         "rig": None, "keep_vertices": None, "rig_mix": 0.5, "rig_strict": False,
         "source_neutral_share": 0.5,  # sources given their neutral (neutral-aware models only)

@@ -255,8 +255,7 @@ class TargetPool:
             elif kind == "cross_topology":
                 entry = pair[1] if target is pair[0] else pair[0]
             else:
-                other = (t_slot + 1 + int(rng.integers(size - 1))) % size if size > 1 else t_slot
-                entry = self.slot(other, step)[int(rng.integers(2))]
+                entry = self.slot(other_slot(t_slot, size, rng), step)[int(rng.integers(2))]
             for present in (target.present, entry.present):   # shapes a rig lacks stay at 0
                 if present is not None:
                     w *= present
@@ -265,9 +264,14 @@ class TargetPool:
         # drawn last, so that the rest of the group does not depend on data.rig_targets
         extra = []
         for _ in range(int(self.cfg.get("rig_targets", 1)) - 1):
-            other = (t_slot + 1 + int(rng.integers(size - 1))) % size if size > 1 else t_slot
-            extra.append(self.slot(other, step)[int(rng.integers(2))])
+            extra.append(self.slot(other_slot(t_slot, size, rng), step)[int(rng.integers(2))])
         return Group(target, sources, ground_truth(weights, target), tuple(extra))
+
+
+def other_slot(t_slot: int, size: int, rng: np.random.Generator) -> int:
+    """A pool slot other than ``t_slot``, uniform over the ``size - 1`` others (``t_slot`` itself
+    when the pool has one slot; then no number is drawn from ``rng``)."""
+    return (t_slot + 1 + int(rng.integers(size - 1))) % size if size > 1 else t_slot
 
 
 def ground_truth(weights: np.ndarray, target: Entry) -> np.ndarray:
