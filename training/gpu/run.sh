@@ -12,7 +12,7 @@
 # SKIP_INSTALL=1 for a dry run here, e.g. (the tiny model of the smoke test as INIT):
 #   PATH=.venv/bin:$PATH SKIP_INSTALL=1 CONFIG=tiny INIT=/tmp/smoke/model.pt WORKERS=1 TRAIN_S=10 MEASURE_STEPS=10 OUT=/tmp/gpu_out bash training/gpu/run.sh
 set -uo pipefail
-CONFIG=${CONFIG:-realistic_rig_heavy}   # the bundled model's config (stage 14 on)
+CONFIG=${CONFIG:-realistic_rig_heavier}   # the bundled model's config (stage 16 on)
 INIT=${INIT:-retarget/checkpoints/default.pt}
 LR=${LR:-5e-5}
 WORKERS=${WORKERS:-14}
