@@ -40,7 +40,7 @@ from nets.geometry import Operators, TorchOperators, load_or_compute_operators, 
 from nets.model import NFSModel, TargetCodes, weights_to_code
 
 from .canonical import Canonicaliser
-from .checkpoint import load_checkpoint, model_from_checkpoint
+from .checkpoint import checkpoint_code_map, load_checkpoint, model_from_checkpoint
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
 from .mesh import Mesh, as_mesh, is_mesh_like
@@ -152,10 +152,16 @@ def source_frames(frames) -> tuple[list[Mesh], bool]:
             for i, f in enumerate(frames)], single
 
 
-def basis_shapes(target: "Target", dims: slice) -> np.ndarray:
+def basis_shapes(target: "Target", dims: slice, code_map: np.ndarray | None = None) -> np.ndarray:
     """The basis decoder's rig on a prepared target, the code dims ``dims`` of it, as shapes in the
-    target's units: (K, V, 3) float32 (``dims`` = slice(0, 53): the baked FACS shapes)."""
-    shapes = target.codes.basis[:, :, dims].permute(2, 0, 1).cpu().numpy()
+    target's units: (K, V, 3) float32 (``dims`` = slice(0, 53): the baked FACS shapes). With
+    ``code_map`` (code_dim, K) the shapes of its K columns as codes instead (``dims`` ignored)."""
+    basis = target.codes.basis
+    if code_map is None:
+        basis = basis[:, :, dims]
+    else:
+        basis = basis @ torch.as_tensor(code_map, dtype=basis.dtype, device=basis.device)
+    shapes = basis.permute(2, 0, 1).cpu().numpy()
     return np.ascontiguousarray(target.proxy.canon.displacement_from_canonical(shapes), np.float32)
 
 
@@ -347,17 +353,29 @@ class Retargeter:
 
     def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
-                 refine_steps: int = 0):
+                 refine_steps: int = 0, code_map: np.ndarray | None = None):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
+        self._source_rigs: dict[tuple, SourceRig] = {}
+        self.code_map = code_map
         self.proxy_vertices = proxy_vertices
         self.chunk = chunk
         self.cache_dir = cache_dir
         self.source_cache_size = int(source_cache_size)
         self._sources: OrderedDict[tuple, SourceTopology] = OrderedDict()
         self.refine_steps = refine_steps   # gradient steps on the free dims of z_GE after the fit
-        self._source_rigs: dict[tuple, SourceRig] = {}
+
+    @property
+    def code_map(self) -> np.ndarray | None:
+        """The code of each FACS shape, (code_dim, 53) float32, or None for the paper's [w, 0]
+        (``weight_codes``, ``retarget.code_map``). Setting it drops the source rigs baked so far."""
+        return self._code_map
+
+    @code_map.setter
+    def code_map(self, value) -> None:
+        self._code_map = check_code_map(value, self.cfg)
+        self._source_rigs.clear()
 
     @classmethod
     def load(cls, path=None, device=None, **kwargs) -> "Retargeter":
@@ -369,7 +387,9 @@ class Retargeter:
                 raise RetargetError(f"no bundled checkpoint at {path}; train one with `retarget "
                                     "train` or pass --checkpoint")
         path = Path(path)
-        return cls(model_from_checkpoint(load_checkpoint(path), path), device, **kwargs)
+        state = load_checkpoint(path)
+        kwargs.setdefault("code_map", checkpoint_code_map(state))
+        return cls(model_from_checkpoint(state, path), device, **kwargs)
 
     # --------------------------------------------------------------------------- preparation
     def _prepare(self, mesh: Mesh, canon=None, ops=None) -> PreparedMesh:
@@ -494,12 +514,16 @@ class Retargeter:
         ``refine``: analysis-by-synthesis on the source's own baked rig (needs ``source_neutral``;
         see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT`` and
         towards 0 with ``REFINE_SPARSITY_INVERT``, reweighted by ``REFINE_REWEIGHT_INVERT``."""
-        z = self.expression_codes(frames, source_neutral, smooth, fps, progress, refine,
-                                  refine_prior=self.REFINE_PRIOR_INVERT,
-                                  refine_sparsity=self.REFINE_SPARSITY_INVERT,
-                                  refine_joint=self.REFINE_JOINT_INVERT,
-                                  refine_reweight=self.REFINE_REWEIGHT_INVERT)
-        return np.clip(z[..., :N_FACS], 0.0, 1.0).astype(np.float32)
+        z = self.encode(frames, source_neutral, progress)
+        if refine:
+            w, _ = self.refine_fit(frames, source_neutral, z, self.REFINE_PRIOR_INVERT,
+                                   self.REFINE_SPARSITY_INVERT, self.REFINE_JOINT_INVERT,
+                                   self.REFINE_REWEIGHT_INVERT)
+            z = w.reshape(z.shape[:-1] + (N_FACS,))
+        w = z[..., :N_FACS]
+        if smooth and w.ndim == 2:
+            w = smooth_codes(w, smooth, fps)
+        return np.clip(w, 0.0, 1.0).astype(np.float32)
 
     # --------------------------------------------------------------------------- analysis by synthesis
     def source_rig(self, source_neutral: Mesh) -> SourceRig:
@@ -520,6 +544,21 @@ class Retargeter:
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
                prior: float | None = None, sparsity: float | None = None,
                joint: bool | None = None, reweight: tuple = ()) -> np.ndarray:
+        """Analysis-by-synthesis (``refine_fit``), as the codes z_GE the decoder draws the fit with
+        (``rig_codes``): (128,) or (T,128) like ``z_ge``, float32."""
+        w, f = self.refine_fit(frames, source_neutral, z_ge, prior, sparsity, joint, reweight)
+        return self.rig_codes(w, f).reshape(np.shape(z_ge))
+
+    def rig_codes(self, w: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """The codes z_GE of weights w (T,53) on the rig plus free dims f (T, code_dim − 53):
+        ``weight_codes(w)`` with f added to its free dims -> (T, code_dim) float32."""
+        z = self.weight_codes(w)
+        z[:, N_FACS:] += f
+        return z
+
+    def refine_fit(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
+                   prior: float | None = None, sparsity: float | None = None,
+                   joint: bool | None = None, reweight: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
@@ -527,7 +566,9 @@ class Retargeter:
         exactly, by ridge least squares on its rig (``SourceRig.fit_free``), for the MLP decoder
         by ``refine_steps`` Adam steps through the decoder on the source neutral (``REFINE_ROWS``
         fixed vertices; 0 = the code is [w, 0]). frames: a Mesh or a list sharing the neutral's
-        topology; z_ge (128,) or (T,128) -> the same shape, float32. prior: the weights' pull
+        topology; z_ge (128,) or (T,128) -> the weights w (T,53) and the free dims f
+        (T, code_dim − 53), float32 (the rig's coordinates: with a ``code_map`` the code they
+        stand for is ``rig_codes(w, f)``, not [w, f]). prior: the weights' pull
         towards the encoder (default ``REFINE_PRIOR``); sparsity: their L1 pull towards 0
         (``SourceRig.fit``; default ``REFINE_SPARSITY``). joint: weights and free dims fitted
         together (``SourceRig.fit_joint``, basis decoder; default ``REFINE_JOINT``). reweight:
@@ -554,7 +595,7 @@ class Retargeter:
                     out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             if rig.free_basis is None and self.refine_steps > 0:
                 out[i, N_FACS:] = self._refine_free_dims(rig, frame.vertices, out[i, :N_FACS])
-        return out.reshape(np.shape(z_ge))
+        return out[:, :N_FACS], out[:, N_FACS:]
 
     def estimate_neutral(self, frames, max_frames: int | None = None) -> Mesh:
         """The performer's neutral estimated from a take alone, for a source without its neutral
@@ -658,8 +699,16 @@ class Retargeter:
 
     def animate(self, target, weights, progress: bool = False) -> np.ndarray:
         """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list
-        of dicts {ICT name: value} -> (V,3) or (T,V,3). z_GE = [w, 0] (``weight_codes``)."""
-        return self.decode(target, weight_codes(weights), progress)
+        of dicts {ICT name: value} -> (V,3) or (T,V,3), decoded from ``weight_codes``."""
+        return self.decode(target, self.weight_codes(weights), progress)
+
+    def weight_codes(self, weights) -> np.ndarray:
+        """FACS weights (as ``weights_array`` takes them) -> the codes z_GE that draw them, (128,)
+        or (T,128) float32: z_GE = [w, 0] (the paper's), or M w with the model's code map M
+        (``code_map``, (code_dim, 53): the code of each FACS shape, ``retarget.code_map``)."""
+        if self.code_map is None:
+            return weight_codes(weights)
+        return (weights_array(weights) @ self.code_map.T).astype(np.float32)
 
     def bake(self, target) -> BakedRig:
         """Decode the 53 one-hot expressions once: a linear blendshape rig for the target. With the
@@ -667,9 +716,22 @@ class Retargeter:
         target = self.prepare(target)
         if target.codes.basis is not None:
             return BakedRig(target.mesh.vertices.astype(np.float32),
-                            basis_shapes(target, slice(0, N_FACS)))
+                            basis_shapes(target, slice(0, N_FACS), self.code_map))
         shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
         return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
+
+
+def check_code_map(code_map, cfg) -> np.ndarray | None:
+    """A code map (code_dim, 53) for a model of config ``cfg`` as a float32 array (None stays
+    None); RetargetError unless it is finite, of that shape and the model's decoder is the
+    basis decoder (the map is a linear change of its rig)."""
+    if code_map is None:
+        return None
+    m = np.asarray(code_map, np.float32)
+    if m.shape != (cfg.code_dim, N_FACS) or not np.isfinite(m).all() or cfg.decoder != "basis":
+        raise RetargetError(f"a code map must be a finite ({cfg.code_dim}, {N_FACS}) array for a "
+                            f"basis-decoder model; got shape {m.shape} for decoder {cfg.decoder!r}")
+    return m
 
 
 def weight_codes(weights) -> np.ndarray:

@@ -90,6 +90,19 @@ def check_state(state: dict, path="checkpoint") -> None:
     for key in ("optimizer", "train_config"):
         if key in state and not isinstance(state[key], dict):
             raise RetargetError(f"{path}: the checkpoint's {key} is not a mapping")
+    if "code_map" in state:
+        cfg, m = checkpoint_config(state, path), state["code_map"]
+        if (not isinstance(m, torch.Tensor) or tuple(m.shape) != (cfg.code_dim, cfg.n_facs)
+                or not bool(torch.isfinite(m).all()) or cfg.decoder != "basis"):
+            raise RetargetError(f"{path}: the checkpoint's code_map is not a finite "
+                                f"({cfg.code_dim}, {cfg.n_facs}) tensor of a basis-decoder model")
+
+
+def checkpoint_code_map(state: dict):
+    """The checked checkpoint's code map (code_dim, 53) float32 numpy array (``retarget.code_map``),
+    or None when it has none."""
+    m = state.get("code_map")
+    return None if m is None else m.detach().cpu().float().numpy()
 
 
 def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:

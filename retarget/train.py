@@ -66,6 +66,9 @@ DEFAULTS = {
              # L_corr: skinning descriptor channels 0-2 as template positions (realistic heads)
              "corr": 0.0},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
+    # the code map fitted into model.pt at export (retarget.code_map; basis decoder): this many
+    # MakeHuman and as many procedural training identities from seed ``seed``; 0 = none
+    "code_map": {"identities": 0, "seed": 0, "ridge": 0.01},
     "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
               "ckpt_minutes": 5.0,
               # processes preparing the samples of the next steps (retarget.prefetch); 0 = in the
@@ -94,8 +97,11 @@ def load_config(path, _seen=()) -> dict:
     if isinstance(raw.get("model"), dict):
         raw["model"] = {**defaults["model"], **raw["model"]}
     cfg = merge(defaults, raw, str(path), replace=("model",))
-    model_cfg(cfg, str(path))  # validates the model section
+    decoder = model_cfg(cfg, str(path)).decoder  # validates the model section
     check_values(cfg, str(path))
+    if cfg["code_map"]["identities"] and decoder != "basis":
+        raise RetargetError(f"{path}: code_map needs the basis decoder (model.decoder: basis); "
+                            "set code_map.identities to 0")
     return cfg
 
 
@@ -113,6 +119,8 @@ VALUE_RULES = {
     ("data", "val_identities"): (int, 1, None, True), ("data", "val_expressions"): (int, 1, None, True),
     ("data", "rig_targets"): (int, 1, 64, True),
     **{("loss", k): (float, 0.0, None, True) for k in DEFAULTS["loss"]},
+    ("code_map", "identities"): (int, 0, 10000, True), ("code_map", "seed"): (int, 0, None, True),
+    ("code_map", "ridge"): (float, 0.0, None, False),
 }
 
 
@@ -445,12 +453,28 @@ class Trainer:
             save_checkpoint(self.out / "last.pt", self.state())
 
     def export(self, path: Path) -> None:
-        """The inference checkpoint: config + model weights only (small)."""
+        """The inference checkpoint: config + model weights only (small), and the code map when
+        the config asks for one (``code_map.identities`` > 0, fitted now: ``fit_code_map``)."""
         if self.rank == 0:
-            save_checkpoint(path, {"format": CHECKPOINT_FORMAT,
-                                   "model_config": self.model_cfg.to_dict(),
-                                   "train_config": self.cfg, "model": self.model.state_dict(),
-                                   "step": self.step})
+            state = {"format": CHECKPOINT_FORMAT, "model_config": self.model_cfg.to_dict(),
+                     "train_config": self.cfg, "model": self.model.state_dict(), "step": self.step}
+            if self.cfg["code_map"]["identities"]:
+                state["code_map"] = torch.from_numpy(self.fit_code_map())
+            save_checkpoint(path, state)
+
+    def fit_code_map(self) -> np.ndarray:
+        """The code map (code_dim, 53) float32 of the model as it is now, on the config's
+        ``code_map`` training identities (``retarget.code_map``); the model's mode is kept."""
+        from .api import Retargeter
+        from .code_map import fit_code_map, training_rigs
+
+        c, was_training = self.cfg["code_map"], self.model.training
+        try:
+            r = Retargeter(self.model, self.device)
+            return fit_code_map(r, training_rigs(c["identities"], c["seed"], self.model_cfg.n_segments),
+                                c["ridge"])
+        finally:
+            self.model.train(was_training)
 
     # ---- loop
     def _log(self, row: dict) -> None:

@@ -41,7 +41,6 @@ def run(args) -> int:
                      len(target.faces), args.force)
     r = retargeter(args)
     tgt = r.prepare(target)
-    from ..api import weight_codes
 
     n = len(track.weights)
     if usd:
@@ -50,7 +49,7 @@ def run(args) -> int:
               f"frame(s)")
         return 0
     verts = (r.bake(tgt).evaluate(track.weights) if args.baked
-             else r.iter_decode(tgt, weight_codes(track.weights), progress=True))
+             else r.iter_decode(tgt, r.weight_codes(track.weights), progress=True))
     written = write_frames(args.out, verts, target.faces, inputs, args, fps=track.fps or 30.0,
                            n_frames=n)
     print(f"wrote {n} frame(s) to {written[0] if len(written) == 1 else args.out}")

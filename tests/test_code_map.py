@@ -1,0 +1,182 @@
+"""The code map (retarget.code_map): its least-squares fit, the Retargeter paths that draw FACS
+weights through it (weight_codes, animate, bake, refine, invert), the checkpoint field and its
+fit at the end of training; tiny untrained models throughout."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from data_synth.identity import sample_identity
+from data_synth.rig import build_rig
+from data_synth.tessellate import tessellate
+from nets.model import NFSConfig, NFSModel
+from retarget.api import Retargeter, basis_shapes
+from retarget.checkpoint import load_checkpoint, save_checkpoint
+from retarget.code_map import CodeMapFit
+from retarget.errors import RetargetError
+from retarget.mesh import Mesh
+from retarget.train import Trainer, load_config
+
+from .test_api import tiny_checkpoint
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY_TRAIN = ROOT / "configs" / "train" / "tiny.yaml"
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return build_rig(sample_identity(0, split="test"), tessellate(n_vertices=400, kind="regular"))
+
+
+def basis_model(seed: int = 0) -> NFSModel:
+    torch.manual_seed(seed)
+    return NFSModel(NFSConfig.preset("tiny", decoder="basis", decoder_fourier=2, neutral_channels=True))
+
+
+def random_map(code_dim: int, seed: int = 0) -> np.ndarray:
+    """The paper's map [I; 0] plus a dense random part: every shape drawn by every code dim."""
+    m = np.eye(code_dim, 53, dtype=np.float32)
+    return m + 0.3 * np.random.default_rng(seed).normal(size=m.shape).astype(np.float32)
+
+
+# ------------------------------------------------------------------------------- the fit
+def test_the_fit_recovers_a_map_that_holds_on_every_head():
+    rng = np.random.default_rng(0)
+    dims = 60
+    truth = rng.normal(size=(dims, 53))
+    fit = CodeMapFit(dims)
+    for h in range(3):
+        x = rng.normal(size=(dims, 90 + 10 * h))
+        b = truth.T @ x
+        if h == 0:
+            b[7] = 0.0                       # a shape this head's rig lacks
+        b[11] = 0.0                          # a shape no head has
+        fit.add(x, b)
+    assert fit.count[7] == 2 and fit.count[11] == 0 and fit.count[0] == 3
+    m = fit.solve(1e-9)
+    keep = np.arange(53) != 11
+    np.testing.assert_allclose(m[:, keep], truth[:, keep], atol=1e-4)
+    np.testing.assert_array_equal(m[:, 11], np.eye(dims)[11])        # the paper's column kept
+    # a heavy ridge pulls every column to the paper's map [I; 0]
+    np.testing.assert_allclose(fit.solve(1e9), np.eye(dims, 53), atol=1e-6)
+
+
+def test_each_heads_shape_counts_relative_to_its_size():
+    """Two heads that disagree on shape 0 by a factor 3: the fit minimises the squared relative
+    errors, (s − 1)² + (s − 3)²/9, at s = 1.2, not the plain squared errors (at their mean 2)."""
+    x = np.zeros((53, 4))
+    x[0, 0] = 1.0
+    fit = CodeMapFit(53)
+    for scale in (1.0, 3.0):
+        b = np.zeros((53, 4))
+        b[0, 0] = scale
+        fit.add(x, b)
+    assert fit.solve(1e-12)[0, 0] == pytest.approx(1.2, rel=1e-6)
+
+
+# ------------------------------------------------------------------------------- the Retargeter
+def test_weights_are_drawn_through_the_map(rig):
+    model = basis_model()
+    m = random_map(model.cfg.code_dim)
+    r = Retargeter(model, device="cpu", code_map=m)
+    neutral = Mesh(rig.neutral, rig.faces)
+    w = np.random.default_rng(1).random((2, 53)).astype(np.float32)
+    np.testing.assert_allclose(r.weight_codes(w), w @ m.T, rtol=1e-6)
+    # bake: shape k is the decoder's drawing of the code M[:, k], and animate is the baked rig
+    baked = r.bake(neutral)
+    rows = basis_shapes(r.prepare(neutral), slice(None))                     # (128, V, 3)
+    np.testing.assert_allclose(baked.deltas, np.tensordot(m.T, rows, 1), rtol=1e-4,
+                               atol=1e-5 * np.abs(baked.deltas).max())
+    scale = np.abs(baked.deltas).max()
+    np.testing.assert_allclose(r.animate(neutral, w), baked.evaluate(w), atol=1e-4 * scale)
+    # without the map the same model draws other shapes
+    assert np.abs(Retargeter(model, device="cpu").bake(neutral).deltas - baked.deltas).max() > 0.1 * scale
+
+
+def test_refine_fits_the_mapped_rig_and_returns_its_codes(rig):
+    model = basis_model()
+    m = random_map(model.cfg.code_dim)
+    r = Retargeter(model, device="cpu")
+    neutral = Mesh(rig.neutral, rig.faces)
+    plain = r.source_rig(neutral).basis.copy()
+    r.code_map = m                                   # drops the rig baked without the map
+    src = r.source_rig(neutral)
+    np.testing.assert_allclose(src.basis, r.bake(neutral).deltas.reshape(53, -1), rtol=1e-6)
+    assert np.abs(src.basis - plain).max() > 0.1 * np.abs(plain).max()
+    w_true = np.random.default_rng(2).uniform(0.2, 0.8, 53).astype(np.float32)
+    frame = Mesh(src.baked.evaluate(w_true), rig.faces)
+    z = r.encode([frame], source_neutral=neutral)
+    w, f = r.refine_fit([frame], neutral, z, prior=1e-10, sparsity=0.0, joint=False)
+    assert np.abs(w[0] - w_true).max() < 0.01           # the weights of the mapped rig (float32)
+    np.testing.assert_allclose(f[0], src.fit_free(frame.vertices, w[0]), rtol=1e-5, atol=1e-6)
+    # refine gives the code that draws them: M w with the free dims added
+    code = r.refine([frame], neutral, z, prior=1e-10, sparsity=0.0, joint=False)
+    expected = w @ m.T
+    expected[:, 53:] += f
+    np.testing.assert_allclose(code, expected, rtol=1e-5, atol=1e-6)
+    # invert returns the fitted weights, not the code's first dims
+    inv = r.invert([frame], source_neutral=neutral, refine=True)
+    w_inv, _ = r.refine_fit([frame], neutral, z, r.REFINE_PRIOR_INVERT, r.REFINE_SPARSITY_INVERT,
+                            r.REFINE_JOINT_INVERT, r.REFINE_REWEIGHT_INVERT)
+    np.testing.assert_allclose(inv, np.clip(w_inv, 0, 1), rtol=1e-6)
+    assert inv.shape == (1, 53) and r.invert(frame, source_neutral=neutral, refine=True).shape == (53,)
+
+
+def test_a_bad_map_is_refused():
+    model = basis_model()
+    with pytest.raises(RetargetError, match=r"\(128, 53\)"):
+        Retargeter(model, device="cpu", code_map=np.zeros((53, 53)))
+    bad = np.eye(128, 53)
+    bad[0, 0] = np.nan
+    with pytest.raises(RetargetError, match="finite"):
+        Retargeter(model, device="cpu", code_map=bad)
+    torch.manual_seed(0)
+    mlp = NFSModel(NFSConfig.preset("tiny"))
+    with pytest.raises(RetargetError, match="basis"):
+        Retargeter(mlp, device="cpu", code_map=np.eye(mlp.cfg.code_dim, 53))
+
+
+# ------------------------------------------------------------------------------- checkpoints
+def test_the_checkpoints_map_is_loaded_and_checked(tmp_path):
+    path = tiny_checkpoint(tmp_path / "basis.pt", decoder="basis", decoder_fourier=2)
+    assert Retargeter.load(path, device="cpu").code_map is None
+    state = load_checkpoint(path)
+    m = random_map(128)
+    state["code_map"] = torch.from_numpy(m)
+    save_checkpoint(tmp_path / "mapped.pt", state)
+    np.testing.assert_array_equal(Retargeter.load(tmp_path / "mapped.pt", device="cpu").code_map, m)
+    state["code_map"] = torch.zeros(128, 52)
+    save_checkpoint(tmp_path / "bad.pt", state)
+    with pytest.raises(RetargetError, match=r"bad\.pt: the checkpoint's code_map"):
+        Retargeter.load(tmp_path / "bad.pt", device="cpu")
+    mlp = load_checkpoint(tiny_checkpoint(tmp_path / "mlp.pt"))
+    mlp["code_map"] = torch.from_numpy(np.eye(128, 53, dtype=np.float32))
+    save_checkpoint(tmp_path / "mlp_map.pt", mlp)
+    with pytest.raises(RetargetError, match=r"mlp_map\.pt: .*basis-decoder"):
+        Retargeter.load(tmp_path / "mlp_map.pt", device="cpu")
+
+
+def test_training_fits_the_map_into_the_exported_model(tmp_path):
+    cfg = load_config(TINY_TRAIN)
+    cfg["train"]["steps"] = 2
+    cfg["model"].update(decoder="basis", decoder_fourier=2)
+    cfg["code_map"]["identities"] = 1
+    trainer = Trainer(cfg, tmp_path / "run", progress=False)
+    trainer.run()
+    m = load_checkpoint(tmp_path / "run" / "model.pt")["code_map"].numpy()
+    assert m.shape == (128, 53) and np.isfinite(m).all()
+    assert np.abs(m - np.eye(128, 53)).max() > 1e-3      # fitted, not the paper's map
+    assert "code_map" not in load_checkpoint(tmp_path / "run" / "last.pt")
+    assert trainer.model.training                          # the fit leaves the model training
+    np.testing.assert_allclose(trainer.fit_code_map(), m, rtol=1e-5, atol=1e-6)   # deterministic
+
+
+def test_a_map_needs_the_basis_decoder_in_the_config(tmp_path):
+    bad = tmp_path / "mlp_map.yaml"
+    bad.write_text(f"base: {TINY_TRAIN}\ncode_map: {{identities: 2}}\n")
+    with pytest.raises(RetargetError, match=r"mlp_map\.yaml: code_map needs the basis decoder"):
+        load_config(bad)
+    bad.write_text(f"base: {TINY_TRAIN}\nmodel: {{decoder: basis}}\ncode_map: {{ridge: 0}}\n")
+    with pytest.raises(RetargetError, match=r"code_map\.ridge must be a number > 0"):
+        load_config(bad)
