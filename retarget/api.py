@@ -329,19 +329,20 @@ class Retargeter:
     #: relative to the mean squared norm of the baked shapes — weak for the codes that transfer
     #: decodes (the source frame explained as well as the rig can), stronger for the weights that
     #: invert returns, which also get an L1 pull towards 0, reweighted twice (``SourceRig.fit``:
-    #: the baked one-hot shapes are not the FACS shapes of the source, off by a median of 0.8 of
-    #: their own size on held-out heads, and the fit must lean on the encoder); the ridge of the free dims (basis decoder); whether transfer and
+    #: the baked one-hot shapes are not the FACS shapes of the source, off by a median of 0.2-0.3
+    #: of their own size on held-out heads with the bundled model and its code map, and the fit
+    #: leans on the encoder a little); the ridge of the free dims (basis decoder); whether transfer and
     #: invert fit the weights and the free dims together (``SourceRig.fit_joint``; transfer
     #: does: the frame is explained better; invert does not: the free dims would take what its
     #: weights must say); source rigs kept baked; vertices decoded per gradient step of the
     #: free-dims refinement (MLP decoder). Tuned on a tuning set apart from the eval's test set
-    #: (docs/RESULTS.md, "Stage 7", "Refine: weights and free dims fitted together" and
-    #: "Inverse rigging's weights").
+    #: (docs/RESULTS.md, "Stage 7", "Refine: weights and free dims fitted together",
+    #: "Inverse rigging's weights" and, for invert's fit, "The code map").
     REFINE_PRIOR = 1e-3
     REFINE_SPARSITY = 0.0
-    REFINE_PRIOR_INVERT = 0.1
-    REFINE_SPARSITY_INVERT = 0.02
-    REFINE_REWEIGHT_INVERT = (0.1, 0.05, 2)
+    REFINE_PRIOR_INVERT = 0.01
+    REFINE_SPARSITY_INVERT = 0.002
+    REFINE_REWEIGHT_INVERT = (0.02, 0.05, 2)
     REFINE_FREE_PRIOR = 1e-3
     REFINE_JOINT = True
     REFINE_JOINT_INVERT = False

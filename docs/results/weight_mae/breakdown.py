@@ -27,21 +27,29 @@ from retarget.evaluate import (EvalData, NetworkMethod, arkit_ict_matrix, ict_to
 from retarget.metrics import squared_errors_mm2
 
 KINDS = ("uniform", "onehot", "sparse")
+#: invert's fit from stage 7 until the code map's retune (the variants before that one change it)
+FIT_BEFORE_CODE_MAP = {"REFINE_PRIOR_INVERT": 0.1, "REFINE_SPARSITY_INVERT": 0.02,
+                       "REFINE_REWEIGHT_INVERT": (0.1, 0.05, 2)}
+
+
+def _before(**attributes) -> dict:
+    return {**FIT_BEFORE_CODE_MAP, **attributes}
+
+
 #: name -> Retargeter attributes (the rest as bundled)
 VARIANTS = {
     "bundled": {},
-    "before (no reweighting)": {"REFINE_REWEIGHT_INVERT": ()},
-    **{f"sparsity {mu}, no reweighting": {"REFINE_SPARSITY_INVERT": mu, "REFINE_REWEIGHT_INVERT": ()}
+    "fit before the code map's retune": _before(),
+    "before (no reweighting)": _before(REFINE_REWEIGHT_INVERT=()),
+    **{f"sparsity {mu}, no reweighting": _before(REFINE_SPARSITY_INVERT=mu, REFINE_REWEIGHT_INVERT=())
        for mu in (0.0, 0.05, 0.1)},
-    **{f"reweight {mu}, eps {eps}": {"REFINE_REWEIGHT_INVERT": (mu, eps, 2)}
+    **{f"reweight {mu}, eps {eps}": _before(REFINE_REWEIGHT_INVERT=(mu, eps, 2))
        for mu in (0.05, 0.1, 0.2, 0.5) for eps in (0.05, 0.2)},
-    **{f"reweight {mu}, eps {eps}, {n} passes": {"REFINE_REWEIGHT_INVERT": (mu, eps, n)}
+    **{f"reweight {mu}, eps {eps}, {n} passes": _before(REFINE_REWEIGHT_INVERT=(mu, eps, n))
        for mu, eps, n in ((0.1, 0.05, 1), (0.1, 0.05, 4), (0.1, 0.02, 2), (0.07, 0.05, 2))},
-    **{f"sparsity {s0}, reweight 0.1, eps 0.05": {"REFINE_SPARSITY_INVERT": s0,
-                                                  "REFINE_REWEIGHT_INVERT": (0.1, 0.05, 2)}
+    **{f"sparsity {s0}, reweight 0.1, eps 0.05": _before(REFINE_SPARSITY_INVERT=s0)
        for s0 in (0.0, 0.05)},
-    **{f"prior {p}, reweight 0.1, eps 0.05": {"REFINE_PRIOR_INVERT": p,
-                                              "REFINE_REWEIGHT_INVERT": (0.1, 0.05, 2)}
+    **{f"prior {p}, reweight 0.1, eps 0.05": _before(REFINE_PRIOR_INVERT=p)
        for p in (0.01, 0.02, 0.05, 0.2)},
     # stage 14's retune: its baked shapes are off by 0.24-0.42 of their size (stage 10: ~0.8), and
     # rig_accuracy.md's α table has the bundled fit's strong prior as the limit once they are
@@ -56,9 +64,14 @@ VARIANTS = {
     **{f"prior {p}, sparsity {s0}, reweight {mu}": {
         "REFINE_PRIOR_INVERT": p, "REFINE_SPARSITY_INVERT": s0, "REFINE_REWEIGHT_INVERT": (mu, 0.05, 2)}
        for p in (0.005, 0.01, 0.02) for s0 in (0.002, 0.005, 0.01) for mu in (0.02, 0.05)},
+    # the weights and the free dims fitted together, as transfer does (reweighting is of the
+    # weights-alone fit, so none)
+    **{f"joint, prior {p}, sparsity {s0}": {"REFINE_JOINT_INVERT": True, "REFINE_PRIOR_INVERT": p,
+                                            "REFINE_SPARSITY_INVERT": s0}
+       for p in (0.01, 0.1) for s0 in (0.0, 0.002, 0.02)},
 }
 #: the variants of the code map's retune (``--variants`` of its command in docs/RESULTS.md)
-CODE_MAP_RETUNE = ["bundled"] + [f"prior {p}, sparsity {s0}, reweight {mu}" for p in (0.005, 0.01, 0.02)
+CODE_MAP_RETUNE = ["fit before the code map's retune"] + [f"prior {p}, sparsity {s0}, reweight {mu}" for p in (0.005, 0.01, 0.02)
                                  for s0 in (0.002, 0.005, 0.01) for mu in (0.02, 0.05)]
 
 
