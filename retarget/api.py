@@ -354,12 +354,15 @@ class Retargeter:
 
     def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
-                 refine_steps: int = 0, code_map: np.ndarray | None = None):
+                 refine_steps: int = 0, code_map: np.ndarray | None = None,
+                 code_map_gate: np.ndarray | None = None):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
         self._source_rigs: dict[tuple, SourceRig] = {}
+        self._code_map_gate = None
         self.code_map = code_map
+        self.code_map_gate = code_map_gate
         self.proxy_vertices = proxy_vertices
         self.chunk = chunk
         self.cache_dir = cache_dir
@@ -378,6 +381,34 @@ class Retargeter:
         self._code_map = check_code_map(value, self.cfg)
         self._source_rigs.clear()
 
+    @property
+    def code_map_gate(self) -> np.ndarray | None:
+        """The code map's gate [a, b] (code_dim + 1,) float32, or None: each head then gets the
+        map as far as σ(a·z_ID + b) says it is like the heads the map was fitted on
+        (``head_code_map``). Setting it drops the source rigs baked so far."""
+        return self._code_map_gate
+
+    @code_map_gate.setter
+    def code_map_gate(self, value) -> None:
+        if value is not None:
+            value = np.asarray(value, np.float32)
+            if value.shape != (self.cfg.code_dim + 1,) or not np.isfinite(value).all():
+                raise RetargetError(f"a code map gate must be a finite ({self.cfg.code_dim + 1},) "
+                                    f"array; got shape {value.shape}")
+        self._code_map_gate = value
+        self._source_rigs.clear()
+
+    def head_code_map(self, target) -> np.ndarray | None:
+        """The code map of one prepared target (code_dim, 53) float32 (``retarget.code_map``:
+        the map itself, or, with a gate, moved from the paper's map towards it by how
+        MakeHuman-like the target's z_ID is), or None without a map."""
+        if self.code_map is None:
+            return None
+        from .code_map import head_code_map
+
+        return head_code_map(self.code_map, self.code_map_gate,
+                             target.codes.z_id.detach().cpu().numpy())
+
     @classmethod
     def load(cls, path=None, device=None, **kwargs) -> "Retargeter":
         """Load a checkpoint (None = the bundled default). RetargetError for a missing, corrupt,
@@ -389,7 +420,9 @@ class Retargeter:
                                     "train` or pass --checkpoint")
         path = Path(path)
         state = load_checkpoint(path)
-        kwargs.setdefault("code_map", checkpoint_code_map(state))
+        code_map, gate = checkpoint_code_map(state)
+        kwargs.setdefault("code_map", code_map)
+        kwargs.setdefault("code_map_gate", gate)
         return cls(model_from_checkpoint(state, path), device, **kwargs)
 
     # --------------------------------------------------------------------------- preparation
@@ -548,12 +581,15 @@ class Retargeter:
         """Analysis-by-synthesis (``refine_fit``), as the codes z_GE the decoder draws the fit with
         (``rig_codes``): (128,) or (T,128) like ``z_ge``, float32."""
         w, f = self.refine_fit(frames, source_neutral, z_ge, prior, sparsity, joint, reweight)
-        return self.rig_codes(w, f).reshape(np.shape(z_ge))
+        return self.rig_codes(w, f, self.source_rig(source_neutral).target).reshape(np.shape(z_ge))
 
-    def rig_codes(self, w: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """The codes z_GE of weights w (T,53) on the rig plus free dims f (T, code_dim − 53):
-        ``weight_codes(w)`` with f added to its free dims -> (T, code_dim) float32."""
-        z = self.weight_codes(w)
+    def rig_codes(self, w: np.ndarray, f: np.ndarray, target) -> np.ndarray:
+        """The codes z_GE of weights w (T,53) on ``target``'s rig plus free dims f
+        (T, code_dim − 53): ``weight_codes(w, target)`` with f added to its free dims ->
+        (T, code_dim) float32. Decoded on another target, the code draws the weights with the
+        first target's code map (the same map where the map has no gate, or for two heads the
+        gate tells alike)."""
+        z = self.weight_codes(w, target)
         z[:, N_FACS:] += f
         return z
 
@@ -701,15 +737,17 @@ class Retargeter:
     def animate(self, target, weights, progress: bool = False) -> np.ndarray:
         """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list
         of dicts {ICT name: value} -> (V,3) or (T,V,3), decoded from ``weight_codes``."""
-        return self.decode(target, self.weight_codes(weights), progress)
+        target = self.prepare(target)
+        return self.decode(target, self.weight_codes(weights, target), progress)
 
-    def weight_codes(self, weights) -> np.ndarray:
-        """FACS weights (as ``weights_array`` takes them) -> the codes z_GE that draw them, (128,)
-        or (T,128) float32: z_GE = [w, 0] (the paper's), or M w with the model's code map M
-        (``code_map``, (code_dim, 53): the code of each FACS shape, ``retarget.code_map``)."""
+    def weight_codes(self, weights, target) -> np.ndarray:
+        """FACS weights (as ``weights_array`` takes them) -> the codes z_GE that draw them on
+        ``target`` (a mesh or a prepared target), (128,) or (T,128) float32: z_GE = [w, 0] (the
+        paper's), or M w with the target's code map M (``head_code_map``, (code_dim, 53): the
+        code of each FACS shape, ``retarget.code_map``)."""
         if self.code_map is None:
             return weight_codes(weights)
-        return (weights_array(weights) @ self.code_map.T).astype(np.float32)
+        return (weights_array(weights) @ self.head_code_map(self.prepare(target)).T).astype(np.float32)
 
     def bake(self, target) -> BakedRig:
         """Decode the 53 one-hot expressions once: a linear blendshape rig for the target. With the
@@ -717,7 +755,7 @@ class Retargeter:
         target = self.prepare(target)
         if target.codes.basis is not None:
             return BakedRig(target.mesh.vertices.astype(np.float32),
-                            basis_shapes(target, slice(0, N_FACS), self.code_map))
+                            basis_shapes(target, slice(0, N_FACS), self.head_code_map(target)))
         shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
         return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
 

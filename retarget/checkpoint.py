@@ -98,11 +98,19 @@ def check_state(state: dict, path="checkpoint") -> None:
                                 f"({cfg.code_dim}, {cfg.n_facs}) tensor of a basis-decoder model")
 
 
+    if "code_map_gate" in state:
+        cfg, g = checkpoint_config(state, path), state["code_map_gate"]
+        if ("code_map" not in state or not isinstance(g, torch.Tensor)
+                or tuple(g.shape) != (cfg.code_dim + 1,) or not bool(torch.isfinite(g).all())):
+            raise RetargetError(f"{path}: the checkpoint's code_map_gate is not a finite "
+                                f"({cfg.code_dim + 1},) tensor beside a code_map")
+
+
 def checkpoint_code_map(state: dict):
-    """The checked checkpoint's code map (code_dim, 53) float32 numpy array (``retarget.code_map``),
-    or None when it has none."""
-    m = state.get("code_map")
-    return None if m is None else m.detach().cpu().float().numpy()
+    """The checked checkpoint's code map (code_dim, 53) and its gate (code_dim + 1,), float32 numpy
+    arrays (``retarget.code_map``); None for what it lacks."""
+    return tuple(None if state.get(k) is None else state[k].detach().cpu().float().numpy()
+                 for k in ("code_map", "code_map_gate"))
 
 
 def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:

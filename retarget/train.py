@@ -67,8 +67,9 @@ DEFAULTS = {
              "corr": 0.0},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
     # the code map fitted into model.pt at export (retarget.code_map; basis decoder): this many
-    # MakeHuman and as many procedural training identities from seed ``seed``; 0 = none
-    "code_map": {"identities": 0, "seed": 0, "ridge": 0.01},
+    # MakeHuman and as many procedural training identities from seed ``seed``; 0 = none. gated:
+    # the map of the MakeHuman heads, given to each head by a gate on its identity code
+    "code_map": {"identities": 0, "seed": 0, "ridge": 0.01, "gated": False},
     "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
               "ckpt_minutes": 5.0,
               # processes preparing the samples of the next steps (retarget.prefetch); 0 = in the
@@ -99,6 +100,9 @@ def load_config(path, _seen=()) -> dict:
     cfg = merge(defaults, raw, str(path), replace=("model",))
     decoder = model_cfg(cfg, str(path)).decoder  # validates the model section
     check_values(cfg, str(path))
+    if not isinstance(cfg["code_map"]["gated"], bool):
+        raise RetargetError(f"{path}: code_map.gated must be true or false, got "
+                            f"{str(cfg['code_map']['gated'])[:40]!r}")
     if cfg["code_map"]["identities"] and decoder != "basis":
         raise RetargetError(f"{path}: code_map needs the basis decoder (model.decoder: basis); "
                             "set code_map.identities to 0")
@@ -459,20 +463,23 @@ class Trainer:
             state = {"format": CHECKPOINT_FORMAT, "model_config": self.model_cfg.to_dict(),
                      "train_config": self.cfg, "model": self.model.state_dict(), "step": self.step}
             if self.cfg["code_map"]["identities"]:
-                state["code_map"] = torch.from_numpy(self.fit_code_map())
+                code_map, gate = self.fit_code_map()
+                state["code_map"] = torch.from_numpy(code_map)
+                if gate is not None:
+                    state["code_map_gate"] = torch.from_numpy(gate)
             save_checkpoint(path, state)
 
-    def fit_code_map(self) -> np.ndarray:
-        """The code map (code_dim, 53) float32 of the model as it is now, on the config's
-        ``code_map`` training identities (``retarget.code_map``); the model's mode is kept."""
+    def fit_code_map(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The code map (code_dim, 53) float32 of the model as it is now and its gate (or None), on
+        the config's ``code_map`` training identities (``retarget.code_map.fit_code_map``); the
+        model's mode is kept."""
         from .api import Retargeter
-        from .code_map import fit_code_map, training_rigs
+        from .code_map import fit_code_map
 
         c, was_training = self.cfg["code_map"], self.model.training
         try:
-            r = Retargeter(self.model, self.device)
-            return fit_code_map(r, training_rigs(c["identities"], c["seed"], self.model_cfg.n_segments),
-                                c["ridge"])
+            return fit_code_map(Retargeter(self.model, self.device), c["identities"], c["seed"],
+                                c["ridge"], c["gated"])
         finally:
             self.model.train(was_training)
 

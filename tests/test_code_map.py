@@ -1,6 +1,6 @@
-"""The code map (retarget.code_map): its least-squares fit, the Retargeter paths that draw FACS
-weights through it (weight_codes, animate, bake, refine, invert), the checkpoint field and its
-fit at the end of training; tiny untrained models throughout."""
+"""The code map (retarget.code_map): its least-squares fit and its gate, the Retargeter paths that
+draw FACS weights through it (weight_codes, animate, bake, refine, invert), the checkpoint fields
+and their fit at the end of training; tiny untrained models throughout."""
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +13,7 @@ from data_synth.tessellate import tessellate
 from nets.model import NFSConfig, NFSModel
 from retarget.api import Retargeter, basis_shapes
 from retarget.checkpoint import load_checkpoint, save_checkpoint
-from retarget.code_map import CodeMapFit
+from retarget.code_map import CodeMapFit, fit_gate, gate_probability, head_code_map
 from retarget.errors import RetargetError
 from retarget.mesh import Mesh
 from retarget.train import Trainer, load_config
@@ -82,7 +82,7 @@ def test_weights_are_drawn_through_the_map(rig):
     r = Retargeter(model, device="cpu", code_map=m)
     neutral = Mesh(rig.neutral, rig.faces)
     w = np.random.default_rng(1).random((2, 53)).astype(np.float32)
-    np.testing.assert_allclose(r.weight_codes(w), w @ m.T, rtol=1e-6)
+    np.testing.assert_allclose(r.weight_codes(w, neutral), w @ m.T, rtol=1e-6)
     # bake: shape k is the decoder's drawing of the code M[:, k], and animate is the baked rig
     baked = r.bake(neutral)
     rows = basis_shapes(r.prepare(neutral), slice(None))                     # (128, V, 3)
@@ -169,7 +169,9 @@ def test_training_fits_the_map_into_the_exported_model(tmp_path):
     assert np.abs(m - np.eye(128, 53)).max() > 1e-3      # fitted, not the paper's map
     assert "code_map" not in load_checkpoint(tmp_path / "run" / "last.pt")
     assert trainer.model.training                          # the fit leaves the model training
-    np.testing.assert_allclose(trainer.fit_code_map(), m, rtol=1e-5, atol=1e-6)   # deterministic
+    again, gate = trainer.fit_code_map()
+    np.testing.assert_allclose(again, m, rtol=1e-5, atol=1e-6)                   # deterministic
+    assert gate is None and "code_map_gate" not in load_checkpoint(tmp_path / "run" / "model.pt")
 
 
 def test_a_map_needs_the_basis_decoder_in_the_config(tmp_path):
@@ -180,3 +182,73 @@ def test_a_map_needs_the_basis_decoder_in_the_config(tmp_path):
     bad.write_text(f"base: {TINY_TRAIN}\nmodel: {{decoder: basis}}\ncode_map: {{ridge: 0}}\n")
     with pytest.raises(RetargetError, match=r"code_map\.ridge must be a number > 0"):
         load_config(bad)
+    bad.write_text(f"base: {TINY_TRAIN}\nmodel: {{decoder: basis}}\ncode_map: {{gated: 1}}\n")
+    with pytest.raises(RetargetError, match=r"code_map\.gated must be true or false"):
+        load_config(bad)
+
+
+# ------------------------------------------------------------------------------- the gate
+def test_the_gate_tells_two_kinds_of_codes_apart_and_moves_the_map():
+    rng = np.random.default_rng(0)
+    centre = rng.normal(size=128)
+    a = centre + 0.3 * rng.normal(size=(20, 128))          # "MakeHuman-like" codes
+    b = -centre + 0.3 * rng.normal(size=(20, 128))
+    gate = fit_gate(np.r_[a, b], np.r_[np.ones(20, bool), np.zeros(20, bool)])
+    assert gate.shape == (129,) and gate.dtype == np.float32
+    held_a = centre + 0.3 * rng.normal(size=128)
+    held_b = -centre + 0.3 * rng.normal(size=128)
+    assert gate_probability(gate, held_a) > 0.95 and gate_probability(gate, held_b) < 0.05
+    m = random_map(128)
+    eye = np.eye(128, 53, dtype=np.float32)
+    np.testing.assert_array_equal(head_code_map(m, None, held_b), m)      # no gate: the map itself
+    p = gate_probability(gate, held_b)
+    np.testing.assert_allclose(head_code_map(m, gate, held_b), eye + p * (m - eye), rtol=1e-6)
+    assert np.abs(head_code_map(m, gate, held_b) - eye).max() < 0.05 * np.abs(m - eye).max()
+    assert np.abs(head_code_map(m, gate, held_a) - m).max() < 0.05 * np.abs(m - eye).max()
+
+
+def test_a_gated_map_is_drawn_by_each_heads_own_probability(rig, tmp_path):
+    model = basis_model()
+    neutral = Mesh(rig.neutral, rig.faces)
+    m = random_map(model.cfg.code_dim)
+    r = Retargeter(model, device="cpu", code_map=m)
+    z_id = r.prepare(neutral).codes.z_id.numpy()
+    # a gate whose probability for this head is 1/4: logit = −ln 3
+    gate = np.r_[np.zeros(128), -np.log(3.0)].astype(np.float32)
+    gate[:128] = 1e-3 * z_id / max(np.linalg.norm(z_id) ** 2, 1e-12)
+    gate[128] -= float(gate[:128] @ z_id)
+    r.code_map_gate = gate
+    eye = np.eye(128, 53, dtype=np.float32)
+    head = r.head_code_map(r.prepare(neutral))
+    np.testing.assert_allclose(head, eye + 0.25 * (m - eye), rtol=1e-4, atol=1e-6)
+    w = np.random.default_rng(1).random(53).astype(np.float32)
+    np.testing.assert_allclose(r.weight_codes(w, neutral), head @ w, rtol=1e-5, atol=1e-6)
+    baked = r.bake(neutral)
+    rows = basis_shapes(r.prepare(neutral), slice(None))
+    np.testing.assert_allclose(baked.deltas, np.tensordot(head.T, rows, 1), rtol=1e-4,
+                               atol=1e-5 * np.abs(baked.deltas).max())
+    # the checkpoint carries the gate; a gate without a map, or of another size, is refused
+    path = tiny_checkpoint(tmp_path / "basis.pt", decoder="basis", decoder_fourier=2)
+    state = load_checkpoint(path)
+    state["code_map"] = torch.from_numpy(m)
+    state["code_map_gate"] = torch.from_numpy(gate)
+    save_checkpoint(tmp_path / "gated.pt", state)
+    np.testing.assert_array_equal(Retargeter.load(tmp_path / "gated.pt", device="cpu").code_map_gate, gate)
+    del state["code_map"]
+    save_checkpoint(tmp_path / "gate_only.pt", state)
+    with pytest.raises(RetargetError, match=r"gate_only\.pt: the checkpoint's code_map_gate"):
+        Retargeter.load(tmp_path / "gate_only.pt", device="cpu")
+    with pytest.raises(RetargetError, match=r"\(129,\)"):
+        r.code_map_gate = np.zeros(128)
+
+
+def test_training_fits_a_gated_map(tmp_path):
+    cfg = load_config(TINY_TRAIN)
+    cfg["train"]["steps"] = 1
+    cfg["model"].update(decoder="basis", decoder_fourier=2)
+    cfg["code_map"].update(identities=1, gated=True)
+    Trainer(cfg, tmp_path / "run", progress=False).run()
+    state = load_checkpoint(tmp_path / "run" / "model.pt")
+    assert state["code_map"].shape == (128, 53) and state["code_map_gate"].shape == (129,)
+    r = Retargeter.load(tmp_path / "run" / "model.pt", device="cpu")
+    assert r.code_map_gate is not None and np.isfinite(r.code_map_gate).all()

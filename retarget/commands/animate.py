@@ -49,7 +49,7 @@ def run(args) -> int:
               f"frame(s)")
         return 0
     verts = (r.bake(tgt).evaluate(track.weights) if args.baked
-             else r.iter_decode(tgt, r.weight_codes(track.weights), progress=True))
+             else r.iter_decode(tgt, r.weight_codes(track.weights, tgt), progress=True))
     written = write_frames(args.out, verts, target.faces, inputs, args, fps=track.fps or 30.0,
                            n_frames=n)
     print(f"wrote {n} frame(s) to {written[0] if len(written) == 1 else args.out}")

@@ -65,8 +65,8 @@ def main():
         raise SystemExit(f"{args.checkpoint} holds a code map already")
     t0 = time.time()
     fit = CodeMapFit(r.cfg.code_dim)
-    for rig in training_rigs(args.identities, args.seed, r.cfg.n_segments, tuple(args.kinds)):
-        fit.add(decoder_rows(r, rig), rig.deltas.reshape(len(rig.deltas), -1))
+    for _, rig in training_rigs(args.identities, args.seed, r.cfg.n_segments, tuple(args.kinds)):
+        fit.add(decoder_rows(r, rig)[0], rig.deltas.reshape(len(rig.deltas), -1))
     print(f"normal equations of {args.identities} identities ({', '.join(args.kinds)}): "
           f"{time.time() - t0:.0f} s", flush=True)
 
