@@ -13,6 +13,9 @@
 #   PATH=.venv/bin:$PATH SKIP_INSTALL=1 CONFIG=tiny INIT=/tmp/smoke/model.pt WORKERS=1 TRAIN_S=10 MEASURE_STEPS=10 OUT=/tmp/gpu_out bash training/gpu/run.sh
 set -uo pipefail
 CONFIG=${CONFIG:-realistic_rig_heavier}   # the bundled model's config (stage 16 on)
+# (the bundled model also has a gated code map: after the run, on this machine,
+#  cp -r <the run's folder> runs/x && retarget train --config realistic_rig_heavier_gated_map
+#  --steps <its steps> --out runs/x --resume exports it with the map, without a training step)
 INIT=${INIT:-retarget/checkpoints/default.pt}
 LR=${LR:-5e-5}
 WORKERS=${WORKERS:-14}
