@@ -11,6 +11,7 @@ from data_synth.identity import sample_identity
 from data_synth.rig import build_rig
 from data_synth.tessellate import tessellate
 from nets.model import NFSConfig, NFSModel
+from retarget import FACS_NAMES
 from retarget.api import Retargeter, basis_shapes
 from retarget.checkpoint import load_checkpoint, save_checkpoint
 from retarget.code_map import CodeMapFit, fit_gate, gate_probability, head_code_map
@@ -252,3 +253,43 @@ def test_training_fits_a_gated_map(tmp_path):
     assert state["code_map"].shape == (128, 53) and state["code_map_gate"].shape == (129,)
     r = Retargeter.load(tmp_path / "run" / "model.pt", device="cpu")
     assert r.code_map_gate is not None and np.isfinite(r.code_map_gate).all()
+
+
+# ------------------------------------------------------------------------------- the commands
+def test_animate_and_export_rig_on_the_command_line_draw_through_the_map(rig, tmp_path):
+    from retarget.cli import main
+    from retarget.io import load_mesh, save_mesh
+
+    path = tiny_checkpoint(tmp_path / "basis.pt", decoder="basis", decoder_fourier=2)
+    state = load_checkpoint(path)
+    m = random_map(128)
+    state["code_map"] = torch.from_numpy(m)
+    save_checkpoint(tmp_path / "mapped.pt", state)
+    save_mesh(tmp_path / "neutral.obj", Mesh(rig.neutral, rig.faces))
+    (tmp_path / "w.json").write_text('{"jawOpen": 0.8, "eyeBlink_L": 0.5}')
+
+    def animate(checkpoint, out):
+        assert main(["animate", str(tmp_path / "neutral.obj"), "--weights", str(tmp_path / "w.json"),
+                     "-o", str(out), "--checkpoint", str(checkpoint), "--device", "cpu"]) == 0
+        return load_mesh(out).vertices
+
+    mapped, plain = animate(tmp_path / "mapped.pt", tmp_path / "a.obj"), animate(path, tmp_path / "b.obj")
+    r = Retargeter.load(tmp_path / "mapped.pt", device="cpu")
+    w = {"jawOpen": 0.8, "eyeBlink_L": 0.5}
+    expected = r.animate(load_mesh(tmp_path / "neutral.obj"), w)
+    scale = np.abs(expected - rig.neutral).max()
+    np.testing.assert_allclose(mapped, expected, atol=1e-4 * scale + 1e-5)
+    assert np.abs(mapped - plain).max() > 0.05 * scale
+    # the exported rig's morph targets are the mapped shapes
+    from pygltflib import GLTF2
+
+    assert main(["export-rig", str(tmp_path / "neutral.obj"), "-o", str(tmp_path / "rig.glb"),
+                 "--checkpoint", str(tmp_path / "mapped.pt"), "--device", "cpu"]) == 0
+    gltf = GLTF2().load(str(tmp_path / "rig.glb"))
+    assert len(gltf.meshes[0].primitives[0].targets) == 53
+    baked = r.bake(load_mesh(tmp_path / "neutral.obj"))
+    jaw = FACS_NAMES.index("jawOpen")
+    acc = gltf.accessors[gltf.meshes[0].primitives[0].targets[jaw]["POSITION"]]
+    assert acc.max is not None and np.allclose(acc.max, baked.deltas[jaw].max(0), atol=1e-4 * scale + 1e-5)
+    unmapped = Retargeter.load(path, device="cpu").bake(load_mesh(tmp_path / "neutral.obj"))
+    assert not np.allclose(acc.max, unmapped.deltas[jaw].max(0), atol=0.01 * scale)
