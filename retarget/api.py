@@ -605,7 +605,7 @@ class Retargeter:
         fixed vertices; 0 = the code is [w, 0]). frames: a Mesh or a list sharing the neutral's
         topology; z_ge (128,) or (T,128) -> the weights w (T,53) and the free dims f
         (T, code_dim − 53), float32 (the rig's coordinates: with a ``code_map`` the code they
-        stand for is ``rig_codes(w, f)``, not [w, f]). prior: the weights' pull
+        stand for is ``rig_codes(w, f, source)``, not [w, f]). prior: the weights' pull
         towards the encoder (default ``REFINE_PRIOR``); sparsity: their L1 pull towards 0
         (``SourceRig.fit``; default ``REFINE_SPARSITY``). joint: weights and free dims fitted
         together (``SourceRig.fit_joint``, basis decoder; default ``REFINE_JOINT``). reweight:
