@@ -293,3 +293,15 @@ def test_animate_and_export_rig_on_the_command_line_draw_through_the_map(rig, tm
     assert acc.max is not None and np.allclose(acc.max, baked.deltas[jaw].max(0), atol=1e-4 * scale + 1e-5)
     unmapped = Retargeter.load(path, device="cpu").bake(load_mesh(tmp_path / "neutral.obj"))
     assert not np.allclose(acc.max, unmapped.deltas[jaw].max(0), atol=0.01 * scale)
+
+
+def test_load_can_leave_the_checkpoints_map_out(rig, tmp_path):
+    path = tiny_checkpoint(tmp_path / "basis.pt", decoder="basis", decoder_fourier=2)
+    state = load_checkpoint(path)
+    state["code_map"] = torch.from_numpy(random_map(128))
+    save_checkpoint(tmp_path / "mapped.pt", state)
+    r = Retargeter.load(tmp_path / "mapped.pt", device="cpu", code_map=None)
+    assert r.code_map is None
+    w = np.random.default_rng(0).random(53).astype(np.float32)
+    np.testing.assert_array_equal(r.weight_codes(w, Mesh(rig.neutral, rig.faces)),
+                                  np.r_[w, np.zeros(75, np.float32)])
