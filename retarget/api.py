@@ -343,6 +343,10 @@ class Retargeter:
     REFINE_PRIOR_INVERT = 0.01
     REFINE_SPARSITY_INVERT = 0.002
     REFINE_REWEIGHT_INVERT = (0.02, 0.05, 2)
+    #: invert's fit (prior, sparsity, reweight) with a code map (the three above) and without one
+    #: (the fit tuned before the map, better there on realistic heads): the code_map setter puts
+    #: the one that fits in the three attributes of the instance
+    REFINE_INVERT_FITS = {True: (0.01, 0.002, (0.02, 0.05, 2)), False: (0.1, 0.02, (0.1, 0.05, 2))}
     REFINE_FREE_PRIOR = 1e-3
     REFINE_JOINT = True
     REFINE_JOINT_INVERT = False
@@ -373,12 +377,15 @@ class Retargeter:
     @property
     def code_map(self) -> np.ndarray | None:
         """The code of each FACS shape, (code_dim, 53) float32, or None for the paper's [w, 0]
-        (``weight_codes``, ``retarget.code_map``). Setting it drops the source rigs baked so far."""
+        (``weight_codes``, ``retarget.code_map``). Setting it drops the source rigs baked so far
+        and sets invert's fit to the one tuned with or without a map (``REFINE_INVERT_FITS``)."""
         return self._code_map
 
     @code_map.setter
     def code_map(self, value) -> None:
         self._code_map = check_code_map(value, self.cfg)
+        (self.REFINE_PRIOR_INVERT, self.REFINE_SPARSITY_INVERT,
+         self.REFINE_REWEIGHT_INVERT) = self.REFINE_INVERT_FITS[self._code_map is not None]
         self._source_rigs.clear()
 
     @property

@@ -274,6 +274,10 @@ def test_animate_and_export_rig_on_the_command_line_draw_through_the_map(rig, tm
         return load_mesh(out).vertices
 
     mapped, plain = animate(tmp_path / "mapped.pt", tmp_path / "a.obj"), animate(path, tmp_path / "b.obj")
+    assert main(["animate", str(tmp_path / "neutral.obj"), "--weights", str(tmp_path / "w.json"), "-o",
+                 str(tmp_path / "c.obj"), "--checkpoint", str(tmp_path / "mapped.pt"), "--device", "cpu",
+                 "--no-code-map"]) == 0
+    np.testing.assert_array_equal(load_mesh(tmp_path / "c.obj").vertices, plain)   # the map left out
     r = Retargeter.load(tmp_path / "mapped.pt", device="cpu")
     w = {"jawOpen": 0.8, "eyeBlink_L": 0.5}
     expected = r.animate(load_mesh(tmp_path / "neutral.obj"), w)
@@ -305,3 +309,17 @@ def test_load_can_leave_the_checkpoints_map_out(rig, tmp_path):
     w = np.random.default_rng(0).random(53).astype(np.float32)
     np.testing.assert_array_equal(r.weight_codes(w, Mesh(rig.neutral, rig.faces)),
                                   np.r_[w, np.zeros(75, np.float32)])
+
+
+def test_invert_fits_with_the_settings_tuned_with_or_without_a_map():
+    model = basis_model()
+    r = Retargeter(model, device="cpu")
+    fits = Retargeter.REFINE_INVERT_FITS
+    assert (r.REFINE_PRIOR_INVERT, r.REFINE_SPARSITY_INVERT, r.REFINE_REWEIGHT_INVERT) == fits[False]
+    r.code_map = random_map(model.cfg.code_dim)
+    assert (r.REFINE_PRIOR_INVERT, r.REFINE_SPARSITY_INVERT, r.REFINE_REWEIGHT_INVERT) == fits[True]
+    assert fits[True] == (Retargeter.REFINE_PRIOR_INVERT, Retargeter.REFINE_SPARSITY_INVERT,
+                          Retargeter.REFINE_REWEIGHT_INVERT)
+    assert fits[True] != fits[False]
+    r.code_map = None
+    assert r.REFINE_PRIOR_INVERT == fits[False][0]

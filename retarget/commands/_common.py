@@ -24,6 +24,9 @@ def add_model_args(p) -> None:
     p.add_argument("--up", help="up axis of the input files, e.g. +z (default +y)")
     p.add_argument("--forward", help="forward axis of the input files, e.g. -y (default +z)")
     p.add_argument("--force", action="store_true", help="try meshes above the size limit anyway")
+    p.add_argument("--no-code-map", action="store_true",
+                   help="leave the checkpoint's code map out: FACS weights drawn as the paper's "
+                        "[w, 0], and invert's fit tuned without a map (docs/RESULTS.md, \"The code map\")")
 
 
 def add_neutral_args(p) -> None:
@@ -115,8 +118,9 @@ def add_smooth_arg(p) -> None:
 def retargeter(args):
     """The Retargeter of ``--checkpoint`` / ``--device``."""
     from ..api import Retargeter
+    extra = {"code_map": None} if getattr(args, "no_code_map", False) else {}
     return Retargeter.load(args.checkpoint, device=args.device,
-                           refine_steps=getattr(args, "refine_steps", 0))
+                           refine_steps=getattr(args, "refine_steps", 0), **extra)
 
 
 def rotation(args) -> np.ndarray:

@@ -36,10 +36,13 @@ def _before(**attributes) -> dict:
     return {**FIT_BEFORE_CODE_MAP, **attributes}
 
 
-#: name -> Retargeter attributes (the rest as bundled)
+#: name -> Retargeter attributes (the rest as bundled; "bundled": the fit the loaded checkpoint gets,
+#: Retargeter.REFINE_INVERT_FITS: the one tuned for the code map when it has one)
 VARIANTS = {
     "bundled": {},
     "fit before the code map's retune": _before(),
+    "fit retuned for the code map": {"REFINE_PRIOR_INVERT": 0.01, "REFINE_SPARSITY_INVERT": 0.002,
+                                     "REFINE_REWEIGHT_INVERT": (0.02, 0.05, 2)},
     "before (no reweighting)": _before(REFINE_REWEIGHT_INVERT=()),
     **{f"sparsity {mu}, no reweighting": _before(REFINE_SPARSITY_INVERT=mu, REFINE_REWEIGHT_INVERT=())
        for mu in (0.0, 0.05, 0.1)},
@@ -193,6 +196,7 @@ def main():
     print("| variant | suite | " + " | ".join(f"{k}: MAE / rig" for k in KINDS + ("all",)) + " |")
     print("| --- | --- |" + " ---: |" * (len(KINDS) + 1))
     for name in ["predict 0"] + args.variants:
+        saved = {key: getattr(r, key) for key in VARIANTS.get(name, {})}
         for key, value in VARIANTS.get(name, {}).items():
             setattr(r, key, value)
         if name != "predict 0":
@@ -211,8 +215,8 @@ def main():
                 print(f"| {name} | {s} | " + " | ".join(
                     f"{t[k]['weight_mae']:.4f} / {t[k]['rig_mse_mm2']:.4g}" if k in t else "—"
                     for k in KINDS + ("all",)) + " |", flush=True)
-        for key in VARIANTS.get(name, {}):
-            setattr(r, key, getattr(Retargeter, key))
+        for key, value in saved.items():
+            setattr(r, key, value)
         if args.out:
             Path(args.out).write_text(json.dumps({"checkpoint": args.checkpoint, "test": args.test,
                                                   "results": results}, indent=1))
