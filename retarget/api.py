@@ -41,6 +41,7 @@ from nets.model import NFSModel, TargetCodes, weights_to_code
 
 from .canonical import Canonicaliser
 from .checkpoint import checkpoint_code_map, load_checkpoint, model_from_checkpoint
+from .code_map import check_code_map, check_gate, head_code_map
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
 from .mesh import Mesh, as_mesh, is_mesh_like
@@ -346,7 +347,8 @@ class Retargeter:
     #: invert's fit (prior, sparsity, reweight) with a code map (the three above) and without one
     #: (the fit tuned before the map, better there on realistic heads): the code_map setter puts
     #: the one that fits in the three attributes of the instance
-    REFINE_INVERT_FITS = {True: (0.01, 0.002, (0.02, 0.05, 2)), False: (0.1, 0.02, (0.1, 0.05, 2))}
+    REFINE_INVERT_FITS = {True: (REFINE_PRIOR_INVERT, REFINE_SPARSITY_INVERT, REFINE_REWEIGHT_INVERT),
+                          False: (0.1, 0.02, (0.1, 0.05, 2))}
     REFINE_FREE_PRIOR = 1e-3
     REFINE_JOINT = True
     REFINE_JOINT_INVERT = False
@@ -383,7 +385,10 @@ class Retargeter:
 
     @code_map.setter
     def code_map(self, value) -> None:
-        self._code_map = check_code_map(value, self.cfg)
+        try:
+            self._code_map = check_code_map(value, self.cfg)
+        except ValueError as e:
+            raise RetargetError(str(e)) from None
         (self.REFINE_PRIOR_INVERT, self.REFINE_SPARSITY_INVERT,
          self.REFINE_REWEIGHT_INVERT) = self.REFINE_INVERT_FITS[self._code_map is not None]
         self._source_rigs.clear()
@@ -397,12 +402,10 @@ class Retargeter:
 
     @code_map_gate.setter
     def code_map_gate(self, value) -> None:
-        if value is not None:
-            value = np.asarray(value, np.float32)
-            if value.shape != (self.cfg.code_dim + 1,) or not np.isfinite(value).all():
-                raise RetargetError(f"a code map gate must be a finite ({self.cfg.code_dim + 1},) "
-                                    f"array; got shape {value.shape}")
-        self._code_map_gate = value
+        try:
+            self._code_map_gate = check_gate(value, self.cfg)
+        except ValueError as e:
+            raise RetargetError(str(e)) from None
         self._source_rigs.clear()
 
     def head_code_map(self, target) -> np.ndarray | None:
@@ -411,8 +414,6 @@ class Retargeter:
         MakeHuman-like the target's z_ID is), or None without a map."""
         if self.code_map is None:
             return None
-        from .code_map import head_code_map
-
         return head_code_map(self.code_map, self.code_map_gate,
                              target.codes.z_id.detach().cpu().numpy())
 
@@ -556,12 +557,11 @@ class Retargeter:
         see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT`` and
         towards 0 with ``REFINE_SPARSITY_INVERT``, reweighted by ``REFINE_REWEIGHT_INVERT``."""
         z = self.encode(frames, source_neutral, progress)
-        if refine:
-            w, _ = self.refine_fit(frames, source_neutral, z, self.REFINE_PRIOR_INVERT,
-                                   self.REFINE_SPARSITY_INVERT, self.REFINE_JOINT_INVERT,
-                                   self.REFINE_REWEIGHT_INVERT)
-            z = w.reshape(z.shape[:-1] + (N_FACS,))
         w = z[..., :N_FACS]
+        if refine:
+            w = self.refine_fit(frames, source_neutral, z, self.REFINE_PRIOR_INVERT,
+                                self.REFINE_SPARSITY_INVERT, self.REFINE_JOINT_INVERT,
+                                self.REFINE_REWEIGHT_INVERT)[0].reshape(w.shape)
         if smooth and w.ndim == 2:
             w = smooth_codes(w, smooth, fps)
         return np.clip(w, 0.0, 1.0).astype(np.float32)
@@ -765,19 +765,6 @@ class Retargeter:
                             basis_shapes(target, slice(0, N_FACS), self.head_code_map(target)))
         shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
         return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
-
-
-def check_code_map(code_map, cfg) -> np.ndarray | None:
-    """A code map (code_dim, 53) for a model of config ``cfg`` as a float32 array (None stays
-    None); RetargetError unless it is finite, of that shape and the model's decoder is the
-    basis decoder (the map is a linear change of its rig)."""
-    if code_map is None:
-        return None
-    m = np.asarray(code_map, np.float32)
-    if m.shape != (cfg.code_dim, N_FACS) or not np.isfinite(m).all() or cfg.decoder != "basis":
-        raise RetargetError(f"a code map must be a finite ({cfg.code_dim}, {N_FACS}) array for a "
-                            f"basis-decoder model; got shape {m.shape} for decoder {cfg.decoder!r}")
-    return m
 
 
 def weight_codes(weights) -> np.ndarray:

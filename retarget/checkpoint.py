@@ -17,6 +17,7 @@ import torch
 from data_synth.facs import N_FACS
 from nets.model import NEUTRAL_CHANNEL_DIM, NFSConfig, NFSModel
 
+from .code_map import check_code_map, check_gate
 from .errors import RetargetError
 from .io import atomic_output, regular_file
 from .prepare import IMAGE_CHANNELS
@@ -75,7 +76,7 @@ def check_state(state: dict, path="checkpoint") -> None:
     """RetargetError naming ``path`` unless the fields the project reads are what it writes: a
     valid model config, ``model`` a mapping of names to tensors, ``step`` an integer >= 0,
     ``elapsed_s`` a finite number >= 0, ``optimizer`` / ``train_config`` mappings (when present)."""
-    checkpoint_config(state, path)
+    cfg = checkpoint_config(state, path)
     model = state.get("model")
     if not isinstance(model, dict) or not all(isinstance(k, str) and isinstance(v, torch.Tensor)
                                               for k, v in model.items()):
@@ -90,20 +91,19 @@ def check_state(state: dict, path="checkpoint") -> None:
     for key in ("optimizer", "train_config"):
         if key in state and not isinstance(state[key], dict):
             raise RetargetError(f"{path}: the checkpoint's {key} is not a mapping")
-    if "code_map" in state:
-        cfg, m = checkpoint_config(state, path), state["code_map"]
-        if (not isinstance(m, torch.Tensor) or tuple(m.shape) != (cfg.code_dim, cfg.n_facs)
-                or not bool(torch.isfinite(m).all()) or cfg.decoder != "basis"):
-            raise RetargetError(f"{path}: the checkpoint's code_map is not a finite "
-                                f"({cfg.code_dim}, {cfg.n_facs}) tensor of a basis-decoder model")
-
-
-    if "code_map_gate" in state:
-        cfg, g = checkpoint_config(state, path), state["code_map_gate"]
-        if ("code_map" not in state or not isinstance(g, torch.Tensor)
-                or tuple(g.shape) != (cfg.code_dim + 1,) or not bool(torch.isfinite(g).all())):
-            raise RetargetError(f"{path}: the checkpoint's code_map_gate is not a finite "
-                                f"({cfg.code_dim + 1},) tensor beside a code_map")
+    for key, check, what in (("code_map", check_code_map, f"({cfg.code_dim}, {cfg.n_facs}) tensor "
+                                                           "of a basis-decoder model"),
+                             ("code_map_gate", check_gate, f"({cfg.code_dim + 1},) tensor beside a "
+                                                           "code_map")):
+        if key not in state:
+            continue
+        ok = isinstance(state[key], torch.Tensor) and "code_map" in state   # a gate needs a map
+        try:
+            ok = ok and check(state[key].detach().cpu().numpy(), cfg) is not None
+        except ValueError:
+            ok = False
+        if not ok:
+            raise RetargetError(f"{path}: the checkpoint's {key} is not a finite {what}")
 
 
 def checkpoint_code_map(state: dict):

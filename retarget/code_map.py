@@ -41,6 +41,31 @@ UV_TESSELLATIONS = ({"n_vertices": 2500, "kind": "adaptive", "region": "full"},
                     {"n_vertices": 1800, "kind": "regular", "region": "face"})
 
 
+def check_code_map(code_map, cfg) -> np.ndarray | None:
+    """A code map (code_dim, 53) for a model of config ``cfg`` as a float32 array (None stays
+    None); ValueError unless it is finite, of that shape and the model's decoder is the basis
+    decoder (the map is a linear change of its rig)."""
+    if code_map is None:
+        return None
+    m = np.asarray(code_map, np.float32)
+    if m.shape != (cfg.code_dim, N_FACS) or not np.isfinite(m).all() or cfg.decoder != "basis":
+        raise ValueError(f"a code map must be a finite ({cfg.code_dim}, {N_FACS}) array of a "
+                         f"basis-decoder model; got shape {m.shape} for decoder {cfg.decoder!r}")
+    return m
+
+
+def check_gate(gate, cfg) -> np.ndarray | None:
+    """A code map's gate (code_dim + 1,) as a float32 array (None stays None); ValueError unless
+    it is finite and of that shape."""
+    if gate is None:
+        return None
+    g = np.asarray(gate, np.float32)
+    if g.shape != (cfg.code_dim + 1,) or not np.isfinite(g).all():
+        raise ValueError(f"a code map gate must be a finite ({cfg.code_dim + 1},) array; got shape "
+                         f"{g.shape}")
+    return g
+
+
 class CodeMapFit:
     """The normal equations of the code map, accumulated head by head: per shape k, G_k = Σ_h
     X_h X_hᵀ / |B_hk|² (dims, dims), c_k = Σ_h X_h B_hkᵀ / |B_hk|² (dims,), over the heads with
