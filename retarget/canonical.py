@@ -39,6 +39,10 @@ FRONT_COS = 0.5           # the face front: surface normals within 60° of +z (c
 JUMP_CELLS = 4.0          # ... and no step in the height field above 4 cells between neighbours
 SEED_RADIUS = 0.1         # components of the face front reaching this fraction of the window
                           # depth around the nose tip make the face (the nose alone may be cut off)
+SLICE_BANDS = 64          # horizontal slices of the mesh's height for finding the shoulders
+SHOULDER_GAIN = 1.4       # the shoulders: the first slice wider than the head and this many times
+                          # as wide as the neck ...
+SHOULDER_MIN_DEPTH = 0.6  # ... at least this many head widths below the top (past the crown)
 #: Canonical width of the face front (the scale) and canonical position of the face point (the
 #: nose tip, at the front's mid x): chosen so the face frame of procedural full heads is within a
 #: few per cent of their bounding-box frame.
@@ -109,14 +113,46 @@ class Canonicaliser:
 
 
 # ------------------------------------------------------------------------------------- face frame
-def head_window_depth(vertices: np.ndarray) -> float:
+def shoulder_depth(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Depth below the mesh's top (max y) where a bust's shoulders begin, inf if none.
+
+    The surface (sampled densely, so any tessellation gives the same slices) is cut into
+    ``SLICE_BANDS`` horizontal slices of the mesh's height; the shoulders are the first slice wider
+    (x extent) than every slice above it and ``SHOULDER_GAIN`` times as wide as the narrowest slice
+    between it and the widest one above (the neck), at least ``SHOULDER_MIN_DEPTH`` head widths
+    below the top (the crown's slices widen fast). A head, a face mask or a head with its neck has
+    none. vertices (V,3) float64, faces (F,3) int -> depth in the vertices' units."""
+    top = vertices[:, 1].max()
+    band = max(float(top - vertices[:, 1].min()), 1e-300) / SLICE_BANDS
+    points = surface_samples(vertices, faces, band)[0]
+    index = np.clip(((top - points[:, 1]) / band).astype(np.int64), 0, SLICE_BANDS - 1)
+    lo = np.full(SLICE_BANDS, np.inf)
+    hi = np.full(SLICE_BANDS, -np.inf)
+    np.minimum.at(lo, index, points[:, 0])
+    np.maximum.at(hi, index, points[:, 0])
+    head = neck = 0.0                                  # the widest slice so far, the narrowest since
+    for i, width in enumerate(hi - lo):
+        if not np.isfinite(width):
+            continue
+        if width > head:
+            if head > 0 and width > SHOULDER_GAIN * neck and i * band >= SHOULDER_MIN_DEPTH * head:
+                return float(i * band)
+            head = neck = float(width)
+        neck = min(neck, float(width))
+    return float("inf")
+
+
+def head_window_depth(vertices: np.ndarray, shoulders: float = float("inf")) -> float:
     """Depth d below the mesh's top (max y) of the head window: the fixed point of
-    d <- HEAD_WINDOW_GAIN × (x extent of the vertices less than d below the top), grown from
-    d = WINDOW_START × the mesh's height.
+    d <- HEAD_WINDOW_GAIN × (x extent of the vertices less than min(d, ``shoulders``) below the
+    top), grown from d = WINDOW_START × the mesh's height.
 
     Growing the window from the top, the head widens faster than the window deepens until the ears;
     then the x extent stops growing and the window stops about one head width below the crown, above
-    the shoulders of a bust. vertices (V,3) float64 -> d in their units."""
+    the shoulders of a bust. On a bust with a wide or a short head that point lies below the top of
+    the shoulders, whose width would then grow the window over the whole bust: the extent is
+    therefore taken above the shoulders (``shoulders``: a bust's :func:`shoulder_depth`).
+    vertices (V,3) float64 -> d in their units."""
     order = np.argsort(-vertices[:, 1], kind="stable")
     depth = vertices[order, 1]
     depth = depth[0] - depth                                     # ascending
@@ -124,7 +160,7 @@ def head_window_depth(vertices: np.ndarray) -> float:
     ext = np.maximum.accumulate(x) - np.minimum.accumulate(x)   # extent of the first i+1 vertices
     d = WINDOW_START * depth[-1]
     for _ in range(1000):
-        grown = HEAD_WINDOW_GAIN * ext[np.searchsorted(depth, d, side="right") - 1]
+        grown = HEAD_WINDOW_GAIN * ext[np.searchsorted(depth, min(d, shoulders), side="right") - 1]
         if grown <= d:
             break
         d = grown
@@ -204,13 +240,16 @@ def fit_face_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     3. The face front (:func:`face_front`): the forward-facing surface connected to the nose tip
        without crossing a silhouette; it ends where the cheeks and temples turn sideways, under the
        chin and up the forehead, so the neck, the ears and a bust's chest are not part of it, and a
-       face mask that keeps the cheeks has all of it. Its width (x extent) is the face's size.
+       face mask that keeps the cheeks has all of it. Its width (x extent) is the face's size. On a
+       bust whose chin runs into the neck without a silhouette, the front stops at the shoulders
+       (:func:`shoulder_depth`).
 
     vertices (V,3) float64 (+y up, +z forward, any units), faces (F,3) int.
     Returns (point (3,): the front's mid x, the nose tip's y and z; the front's width), input units.
     """
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
-    d = head_window_depth(vertices)
+    shoulders = shoulder_depth(vertices, faces)
+    d = head_window_depth(vertices, shoulders)
     top = vertices[:, 1].max()
     in_window = vertices[:, 1] >= top - d
     tip = vertices[in_window][np.argmax(vertices[in_window, 2])]
@@ -226,6 +265,7 @@ def fit_face_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     rows_y = lo[1] + (np.arange(shape[1]) + 0.5) * cell
     seed = np.unravel_index(np.argmax(np.where(rows_y >= top - d, height, -np.inf)), shape)
     labels = face_front(height, front_nz, cell)
+    labels[:, rows_y < top - shoulders] = -1                     # nothing below a bust's shoulders
     gi, gj = np.ogrid[:shape[0], :shape[1]]
     near_tip = (gi - seed[0]) ** 2 + (gj - seed[1]) ** 2 <= (SEED_RADIUS * d / cell) ** 2
     touching = np.unique(labels[near_tip & (labels >= 0)])

@@ -117,6 +117,30 @@ def test_face_frame_is_the_same_for_a_face_mask_a_head_and_a_bust():
     assert abs(boxes["face mask"].scale / boxes["head"].scale - 1) > 0.1
 
 
+@pytest.mark.parametrize("split,seed", [("test", 19), ("train", 1020)])
+def test_face_frame_of_a_bust_with_a_wide_or_short_head_stops_at_the_shoulders(split, seed):
+    """Two MakeHuman busts whose head is wide (test 19, 22 cm at the ears) or short (train 1020): the
+    head window's fixed point lies below the top of their shoulders. Before the shoulders were
+    found, the window grew over the whole bust and the face front ran into the chest, so their face
+    frame was 3-4 times too wide and the model drew garbage on them (its rig 1.3-2x the shapes'
+    size off). The bust's frame must be its head's."""
+    from data_synth.makehuman import (base_head_rig, build_head_rig, head_tessellation,
+                                      sample_head_identity)
+    from retarget.canonical import fit_face_frame, shoulder_depth
+
+    base = base_head_rig(sample_head_identity(seed, split), "arkit")
+    crops = {crop: build_head_rig(base, head_tessellation(seed=seed, n_vertices=2000, kind="decimated",
+                                                          crop=crop), 6)
+             for crop in ("head_neck", "bust")}
+    frames = {k: fit_face_frame(r.neutral.astype(np.float64), r.faces) for k, r in crops.items()}
+    shoulders = {k: shoulder_depth(r.neutral.astype(np.float64), r.faces) for k, r in crops.items()}
+    assert shoulders["head_neck"] == np.inf
+    assert 15.0 < shoulders["bust"] < 30.0                               # cm below the crown
+    (p_head, w_head), (p_bust, w_bust) = frames["head_neck"], frames["bust"]
+    assert abs(w_bust / w_head - 1) < 0.05
+    assert np.linalg.norm(p_bust - p_head) < 0.5                         # cm
+
+
 def test_frame_kind_errors():
     v, f = procedural(0, 600, "regular", "full")
     with pytest.raises(ValueError, match="unknown canonical frame"):
