@@ -149,11 +149,13 @@ def test_heavier_rig_config_changes_only_the_weight_of_l_rig():
     assert _without(heavier, "loss", "rig") == _without(heavy, "loss", "rig")
 
 
-def test_heavy_no_neutral_ablation_differs_from_the_bundled_config_only_in_the_encoder():
-    """realistic_rig_heavy_no_neutral.yaml (the no_neutral ablation at the bundled budget) is the
-    bundled run's config with the paper's expression encoder: same data, loss, schedule."""
-    heavy = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy.yaml")
-    ablation = load_config(ROOT / "configs" / "train" / "realistic_rig_heavy_no_neutral.yaml")
+@pytest.mark.parametrize("bundled", ["realistic_rig_heavy", "realistic_rig_heavier"])
+def test_no_neutral_ablations_differ_from_the_bundled_configs_only_in_the_encoder(bundled):
+    """realistic_rig_heavy_no_neutral.yaml and realistic_rig_heavier_no_neutral.yaml (the no_neutral
+    ablation at the bundled budget: stages 13-15, 16-17) are the bundled run's configs with the
+    paper's expression encoder: same data, loss, schedule."""
+    heavy = load_config(ROOT / "configs" / "train" / f"{bundled}.yaml")
+    ablation = load_config(ROOT / "configs" / "train" / f"{bundled}_no_neutral.yaml")
     assert (heavy["model"]["neutral_channels"], ablation["model"]["neutral_channels"]) == (True, False)
     assert _without(ablation, "model", "neutral_channels") == _without(heavy, "model", "neutral_channels")
 
