@@ -475,7 +475,8 @@ def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
 
 
 # each committed state (training/README.md) and the config its README resumes it under
-COMMITTED_STATES = {"stage17": "realistic_rig_heavier", "stage18": "realistic_rig_heavier"}
+COMMITTED_STATES = {"stage17": "realistic_rig_heavier", "stage18": "realistic_rig_heavier",
+                    "ablation_no_neutral": "realistic_rig_heavier_no_neutral"}
 
 
 def test_every_committed_state_is_listed():
