@@ -31,10 +31,11 @@ from cases import SUITES, load, table_row  # noqa: E402
 HEADER = "| fit | procedural | realistic heads | ARKit rig |\n| --- | ---: | ---: | ---: |"
 
 
-def in_span(case: dict) -> np.ndarray:
-    """The true ICT shapes projected on the rows of the head's decoder rig X: (53, 3V)."""
+def in_span(case: dict, shapes=None) -> np.ndarray:
+    """``shapes`` (K, 3V) (default: the case's true shapes) projected on the rows of the head's
+    decoder rig X: (K, 3V)."""
     q, _ = np.linalg.qr(np.asarray(case["X"], np.float64).T)
-    t = np.asarray(case["true"], np.float64)
+    t = np.asarray(case["true"] if shapes is None else shapes, np.float64)
     return (t @ q) @ q.T
 
 
@@ -44,13 +45,11 @@ def shape_errors(cases) -> None:
         baked, best = [], []
         for c in (c for c in cases if str(c["suite"]) == suite):
             a, t = np.asarray(c["A"], np.float64), np.asarray(c["true"], np.float64)
-            p = in_span(c) if suite != "real_rig" else None
             if suite == "real_rig":                       # ARKit shapes against sums of ICT shapes
                 m = c["arkit_ict"]
                 keep = m.sum(1) > 0
-                q, _ = np.linalg.qr(np.asarray(c["X"], np.float64).T)
                 a, t = (m @ a)[keep], t[keep]
-                p = (t @ q) @ q.T
+            p = in_span(c, t)
             n = np.linalg.norm(t, axis=1)
             ok = n > 0
             baked.append(np.median(np.linalg.norm(a - t, axis=1)[ok] / n[ok]))
