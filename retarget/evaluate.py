@@ -82,7 +82,8 @@ from .config import configs_dir, find_config, merge, read_yaml
 from .errors import RetargetError
 from .io import regular_file
 from .mesh import Mesh
-from .metrics import segment_mse_mm2, second_difference_jitter_mm, squared_errors_mm2, weight_mae
+from .metrics import (second_difference_jitter_mm, segment_mse_mm2, squared_errors_mm2, standard_error,
+                      weight_mae)
 from .oracle import closest_point_transfer, displacement_transfer, uv_transfer_matrix
 from .smoothing import FILTERS, smooth_codes
 
@@ -654,7 +655,8 @@ class Evaluation:
         return res
 
     def suite_inverse(self, suite: str = "inverse") -> dict:
-        """Inverse rigging: rig MSE of the re-evaluated predicted weights, and the weight MAE."""
+        """Inverse rigging: rig MSE of the re-evaluated predicted weights, and the weight MAE with
+        its standard error over the suite's cases (identities: ``standard_error``)."""
         res = {"exact_gt": True, "methods": {}}
         for m in self.methods:
             errs, maes = [], []
@@ -666,7 +668,8 @@ class Evaluation:
                                         case.source.segments, self.cfg["n_segments"]))
                 maes.append(weight_mae(w, case.source_weights))
             if errs:
-                res["methods"][m.name] = {**summarise(errs), "weight_mae": float(np.mean(maes))}
+                res["methods"][m.name] = {**summarise(errs), "weight_mae": float(np.mean(maes)),
+                                          "weight_mae_se": standard_error(maes)}
         return res
 
     def suite_jitter(self) -> dict:
@@ -743,6 +746,8 @@ class Evaluation:
                     break
                 if tag == "sampled":
                     entry[tag] = {k: {n: float(np.mean(v)) for n, v in b.items()} for k, b in block.items()}
+                    if "invert" in block:                  # one rig: the error over its frames
+                        entry[tag]["invert"]["weight_mae_se"] = standard_error(block["invert"]["weight_mae"])
                 else:
                     entry[tag] = {s: {f"{k}.{n}": float(v[j]) for k, b in block.items() for n, v in b.items()}
                                   for j, s in enumerate(shapes)}
@@ -834,6 +839,11 @@ def to_markdown(results: dict) -> str:
         """The error at ``keys`` with its do-nothing ratio."""
         return fmt_ratio(get(suite, m, *keys), dig(s.get(suite, {}).get("ratios", {}).get(m), keys))
 
+    def mae_cell(suite, m, *keys):
+        """A weight MAE with its standard error (``<keys>_se``) where the eval gave one."""
+        se = get(suite, m, *keys[:-1], keys[-1] + "_se")
+        return cell(suite, m, *keys) + ("" if se is None else f" ± {se:.2g}")
+
     for suite, title in (("self", "Self-retargeting"), ("cross_identity", "Cross-identity"),
                          ("cross_topology", "Cross-topology"),
                          ("head_self", "Realistic heads: self-retargeting"),
@@ -861,8 +871,9 @@ def to_markdown(results: dict) -> str:
         out.append("do nothing = weights 0 applied to the rig (the neutral), and the MAE of "
                    "predicting 0.\n")
         rows = [[m, cell(inv, m, "mse_mm2"), cell(inv, m, "seg_mse_mm2"),
-                 cell(inv, m, "weight_mae")] for m in methods]
-        out.append(md_table(["method", "rig MSE", "segment-avg MSE", "weight MAE"], rows) + "\n")
+                 mae_cell(inv, m, "weight_mae")] for m in methods]
+        out.append(md_table(["method", "rig MSE", "segment-avg MSE",
+                             "weight MAE ± standard error over identities"], rows) + "\n")
     for anim, own, heads in (("animate", "self", ""), ("head_animate", "head_self", "Realistic heads: ")):
         if anim not in s:
             continue
@@ -888,14 +899,14 @@ def to_markdown(results: dict) -> str:
                    "real → real and inversion have exact GT; procedural ↔ real GT is the other rig "
                    "driven by the same weights (semantic, not exact).\n")
         header = ["method", "real→real MSE (exact)", "invert: rig MSE (exact)",
-                  "invert: weight MAE (exact)", "procedural→real MSE (semantic)",
+                  "invert: weight MAE ± standard error over frames (exact)", "procedural→real MSE (semantic)",
                   "real→procedural MSE (semantic)", "animate from true weights MSE (exact)",
                   "unmoved → itself MSE (the floor, exact)"]
         keys = [("real_to_real", "mse_mm2"), ("invert", "rig_mse_mm2"), ("invert", "weight_mae"),
                 ("procedural_to_real", "mse_mm2"), ("real_to_procedural", "mse_mm2"),
                 ("animate", "mse_mm2"), ("unmoved", "mse_mm2")]
-        rows = [[m] + [cell("real_rig", m, "sampled", *k) for k in keys]
-                for m in methods if m in r["methods"]]
+        rows = [[m] + [(mae_cell if k[1] == "weight_mae" else cell)("real_rig", m, "sampled", *k)
+                       for k in keys] for m in methods if m in r["methods"]]
         out.append(md_table(header, rows) + "\n")
         networks = [m for m in methods if m in r["methods"] and m not in BASELINES_FIRST + BASELINES_LAST]
         for m in networks[:1]:
@@ -904,7 +915,7 @@ def to_markdown(results: dict) -> str:
             rows = [[shape] + [cell("real_rig", m, "per_shape", shape, c) for c in cols]
                     for shape in r["shapes"]]
             out.append(f"<details><summary>Real rig per ARKit shape (one-hot), {m}</summary>\n\n"
-                       + md_table(["shape"] + header[1:-1], rows) + "\n\n</details>\n")
+                       + md_table(["shape"] + [h.replace(" ± standard error over frames", "") for h in header[1:-1]], rows) + "\n\n</details>\n")
     if "frame" in s:
         f = s["frame"]
         out.append("### Canonical frame under crops (no method: scale / the reference's, and the "

@@ -50,3 +50,14 @@ def second_difference_jitter_mm(frames_cm: np.ndarray) -> float:
 def weight_mae(pred: np.ndarray, true: np.ndarray) -> float:
     """Mean absolute error of FACS weights: pred, true (..., K) (unitless, in [0, 1])."""
     return float(np.abs(np.asarray(pred, np.float64) - np.asarray(true, np.float64)).mean())
+
+
+def standard_error(values) -> float | None:
+    """Standard error of the mean of ``values`` (n,): sample standard deviation / √n; None for
+    fewer than 2 values. The eval gives it over the units a suite draws independently (the
+    identities of an inverse-rigging suite, the frames of the one real rig)."""
+    v = np.asarray(values, np.float64).reshape(-1)
+    if len(v) < 2:
+        return None
+    return float(v.std(ddof=1) / np.sqrt(len(v)))
+

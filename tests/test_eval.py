@@ -17,7 +17,8 @@ from retarget.evaluate import (SUITES, TRANSFER_SUITES, ClosestPointMethod, DoNo
                                RealRig, EvalData, arkit_ict_matrix,
                                case_errors, ict_to_arkit_weights, load_eval_config,
                                parse_checkpoints, summarise, to_markdown)
-from retarget.metrics import mse_mm2, second_difference_jitter_mm, segment_mse_mm2, weight_mae
+from retarget.metrics import (mse_mm2, second_difference_jitter_mm, segment_mse_mm2, standard_error,
+                             weight_mae)
 from retarget.oracle import closest_point_transfer, displacement_transfer, locate, uv_transfer_matrix
 from retarget.train import CHECKPOINT_FORMAT, save_checkpoint
 
@@ -78,6 +79,9 @@ def test_jitter_and_weight_mae():
     quadratic = np.ones((10, 5, 3)) * t ** 2 * np.array([0, 0.05, 0])   # second difference 0.1 cm
     assert second_difference_jitter_mm(quadratic) == pytest.approx(1.0)
     assert weight_mae(np.full(53, 0.25), np.zeros(53)) == pytest.approx(0.25)
+    # sample standard deviation / sqrt(n): values 1, 2, 3, 4 -> sqrt(5/3) / 2
+    assert standard_error([1.0, 2.0, 3.0, 4.0]) == pytest.approx(np.sqrt(5.0 / 3.0) / 2.0)
+    assert standard_error([0.3]) is None and standard_error(np.full(5, 0.2)) == pytest.approx(0.0)
 
 
 def test_arkit_weight_mapping():
@@ -171,6 +175,8 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     inv_nothing = res["inverse"]["methods"]["do nothing"]
     inv_cases = EvalData(cfg).cases("inverse")
     assert inv_nothing["weight_mae"] == pytest.approx(np.mean([c.source_weights.mean() for c in inv_cases]))
+    per_identity = [c.source_weights.mean() for c in inv_cases]      # predicting 0: each case's MAE
+    assert inv_nothing["weight_mae_se"] == pytest.approx(np.std(per_identity, ddof=1) / np.sqrt(len(inv_cases)))
     assert "closest point" not in res["inverse"]["methods"]
     assert res["jitter"]["methods"]["do nothing"]["raw"]["jitter_mm"] == 0.0
     gt = res["self"]["methods"]["gt+offset"]
@@ -218,6 +224,8 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     real = res["suites"]["real_rig"]["methods"]["full"]
     assert set(real["per_shape"]) == {"jawOpen", "eyeBlinkLeft"}
     assert real["sampled"]["invert"]["weight_mae"] >= 0
+    assert real["sampled"]["invert"]["weight_mae_se"] > 0      # over the rig's sampled frames
+    assert " ± " in (out / "eval.md").read_text()           # the tables give the standard errors
     real_methods = res["suites"]["real_rig"]["methods"]
     assert set(real_methods) == {"full", "noskin", "do nothing", "closest point"}
     assert real_methods["closest point"]["sampled"]["real_to_real"]["mse_mm2"] < 1e-8
@@ -339,6 +347,12 @@ def test_split_val_draws_validation_identities_and_a_bad_split_is_named(tmp_path
     with pytest.raises(RetargetError, match=r"bad_split\.yaml: split must be one of test, val, got 'train'"):
         load_eval_config(bad)
     assert load_eval_config(ROOT / "configs" / "eval" / "validation.yaml")["split"] == "val"
+    # the weights' config: the test split, a superset of the default eval's identities and frames
+    weights, default = (load_eval_config(ROOT / "configs" / "eval" / f"{n}.yaml") for n in ("weights", "default"))
+    assert weights["split"] == "test" and weights["seed"] == default["seed"]
+    assert weights["identities"] > default["identities"] and weights["heads"]["identities"] > default["heads"]["identities"]
+    assert weights["real_rig"]["expressions"] > default["real_rig"]["expressions"]
+    assert weights["real_rig"]["path"] == default["real_rig"]["path"]
 
 
 def test_a_missing_real_rig_leaves_its_suite_out_unless_asked_for(tmp_path, capsys):
