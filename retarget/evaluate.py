@@ -542,9 +542,11 @@ def case_errors(pred: np.ndarray, gt: np.ndarray, segments, n_segments: int) -> 
 def summarise(errors: list[dict]) -> dict:
     """Pool case errors: MSE = mean over all frames of all cases; per-segment MSE = mean over cases
     of each segment's MSE (NaN where no case has the segment); segment-averaged MSE = mean over
-    segments of the per-segment MSE."""
+    segments of the per-segment MSE; ``case_mse_mm2``: each case's MSE, in the suite's case order
+    (for paired comparisons of two methods on the same cases)."""
     out = {"mse_mm2": float(np.mean(np.concatenate([e["frame_mse_mm2"] for e in errors]))),
-           "n_frames": int(sum(len(e["frame_mse_mm2"]) for e in errors))}
+           "n_frames": int(sum(len(e["frame_mse_mm2"]) for e in errors)),
+           "case_mse_mm2": [float(np.mean(e["frame_mse_mm2"])) for e in errors]}
     segs = [e["per_segment_mm2"] for e in errors if e["per_segment_mm2"] is not None]
     if segs:
         per_seg = np.stack(segs)
@@ -744,8 +746,10 @@ class Evaluation:
                         block[key] = {"mse_mm2": squared_errors_mm2(preds[None], case.gt).mean(1)}
                 if not block:
                     break
-                if tag == "sampled":
-                    entry[tag] = {k: {n: float(np.mean(v)) for n, v in b.items()} for k, b in block.items()}
+                if tag == "sampled":                       # and each frame's, for paired comparisons
+                    entry[tag] = {k: {**{n: float(np.mean(v)) for n, v in b.items()},
+                                      **{f"frame_{n}": [float(x) for x in v] for n, v in b.items()}}
+                                  for k, b in block.items()}
                     if "invert" in block:                  # one rig: the error over its frames
                         entry[tag]["invert"]["weight_mae_se"] = standard_error(block["invert"]["weight_mae"])
                 else:

@@ -181,6 +181,10 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     assert res["jitter"]["methods"]["do nothing"]["raw"]["jitter_mm"] == 0.0
     gt = res["self"]["methods"]["gt+offset"]
     assert gt["mse_mm2"] == pytest.approx(expected) and gt["seg_mse_mm2"] == pytest.approx(expected)
+    # each case's MSE, in case order: doing nothing there is that case's motion
+    assert res["self"]["methods"]["do nothing"]["case_mse_mm2"] == pytest.approx(
+        [mse_mm2(c.gt, c.target.neutral[None]) for c in cases])
+    assert gt["case_mse_mm2"] == pytest.approx([expected] * len(cases))
     assert res["self"]["methods"]["oracle (u,v)"]["mse_mm2"] < 1e-8
     assert res["cross_topology"]["methods"]["gt+offset"]["mse_mm2"] == pytest.approx(expected)
     inv = res["inverse"]["methods"]["gt+offset"]
@@ -225,6 +229,9 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     assert set(real["per_shape"]) == {"jawOpen", "eyeBlinkLeft"}
     assert real["sampled"]["invert"]["weight_mae"] >= 0
     assert real["sampled"]["invert"]["weight_mae_se"] > 0      # over the rig's sampled frames
+    frames = real["sampled"]["invert"]["frame_weight_mae"]     # and each frame's, for pairing
+    assert len(frames) > 1 and np.mean(frames) == pytest.approx(real["sampled"]["invert"]["weight_mae"])
+    assert np.std(frames, ddof=1) / np.sqrt(len(frames)) == pytest.approx(real["sampled"]["invert"]["weight_mae_se"])
     assert " ± " in (out / "eval.md").read_text()           # the tables give the standard errors
     real_methods = res["suites"]["real_rig"]["methods"]
     assert set(real_methods) == {"full", "noskin", "do nothing", "closest point"}
