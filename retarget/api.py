@@ -641,6 +641,36 @@ class Retargeter:
                 out[i, N_FACS:] = self._refine_free_dims(rig, frame.vertices, out[i, :N_FACS])
         return out[:, :N_FACS], out[:, N_FACS:]
 
+    def fit_residuals(self, frames, source_neutral: Mesh, weights) -> tuple[np.ndarray, np.ndarray]:
+        """How much of each frame the weights explain on the source's own rig (``source_rig``:
+        the network's 53 shapes baked on ``source_neutral``, with the code map where the model
+        has one): the RMS over vertices of the residual frame − ``BakedRig.evaluate(w)``, and of
+        the frame's motion frame − source_neutral, both (T,) float32 in the source's units. Their ratio is
+        the share of a frame's motion the weights leave unexplained (0: all of it explained; 1:
+        as far off as the neutral). Frames far above a take's median are worth a look: an
+        expression outside the 53 FACS shapes, a bad scan, a wrong neutral. The network's shapes
+        are not the performer's exactly (docs/RESULTS.md, "What the weights' error is made of"),
+        so even the true weights leave some residual. frames: a Mesh or a list sharing the
+        neutral's topology; weights (53,) or (T,53), e.g. from ``invert``."""
+        if source_neutral is None:
+            raise RetargetError("fit_residuals needs the source's neutral (source_neutral=)")
+        frames, _ = source_frames(frames)
+        w = np.asarray(weights, np.float32)
+        if w.shape[-1:] != (N_FACS,) or w.size != len(frames) * N_FACS:
+            raise RetargetError(f"fit_residuals: weights of shape {w.shape} for {len(frames)} "
+                                f"frame(s); expected ({len(frames)}, {N_FACS})")
+        rig = self.source_rig(source_neutral)
+        baked, rest = rig.baked, rig.target.mesh.vertices
+        if frames[0].vertices.shape != baked.neutral.shape:
+            raise RetargetError(f"fit_residuals: the frames have {len(frames[0].vertices)} vertices, "
+                                f"the source neutral {len(baked.neutral)}: they must share a topology")
+        w = w.reshape(len(frames), N_FACS)
+        residual, motion = np.empty(len(frames), np.float32), np.empty(len(frames), np.float32)
+        for i, (frame, drawn) in enumerate(zip(frames, baked.evaluate(w))):
+            residual[i] = np.sqrt(np.square(frame.vertices - drawn).sum(-1).mean())
+            motion[i] = np.sqrt(np.square(frame.vertices - rest).sum(-1).mean())
+        return residual, motion
+
     def estimate_neutral(self, frames, max_frames: int | None = None) -> Mesh:
         """The performer's neutral estimated from a take alone, for a source without its neutral
         mesh (``--estimate-neutral``; beyond the paper): each frame f_t is encoded without a

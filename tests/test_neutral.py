@@ -15,6 +15,7 @@ from data_synth.tessellate import tessellate
 from nets.model import NEUTRAL_CHANNEL_DIM, NFSConfig, NFSModel
 from retarget.api import BakedRig, Retargeter, SourceRig
 from retarget.cli import main
+from retarget.errors import RetargetError
 from retarget.io import save_mesh
 from retarget.mesh import Mesh
 from retarget.prepare import neutral_channels, vertex_features
@@ -268,6 +269,33 @@ def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
     np.testing.assert_array_equal(one, z[0])
 
 
+def test_fit_residuals_measure_what_the_weights_leave_on_the_source_rig(r, rig, weights):
+    neutral = Mesh(rig.neutral, rig.faces)
+    baked = r.source_rig(neutral).baked
+    frames = [Mesh(f, rig.faces) for f in baked.evaluate(weights)]
+    residual, motion = r.fit_residuals(frames, neutral, weights)
+    # frames drawn by the rig itself: nothing left; the motion is the RMS displacement
+    assert residual.shape == motion.shape == (3,) and residual.max() < 1e-4 * motion.min()
+    np.testing.assert_allclose(motion, [np.sqrt(np.square(f.vertices - rig.neutral).sum(-1).mean())
+                                        for f in frames], rtol=1e-5)
+    # weights 0 leave the frame against the rig's own neutral (the decoder's output at zero
+    # weights, which an untrained model puts off the source neutral)
+    residual0, motion0 = r.fit_residuals(frames, neutral, np.zeros((3, 53)))
+    np.testing.assert_allclose(residual0, [np.sqrt(np.square(f.vertices - baked.neutral).sum(-1).mean())
+                                           for f in frames], rtol=1e-5)
+    np.testing.assert_array_equal(motion0, motion)
+    # invert's own weights on rig frames leave less than half of the motion unexplained
+    w = r.invert(frames, source_neutral=neutral, refine=True)
+    assert np.all(r.fit_residuals(frames, neutral, w)[0] < 0.5 * motion)
+    with pytest.raises(RetargetError, match=r"weights of shape \(2, 53\) for 3 frame\(s\)"):
+        r.fit_residuals(frames, neutral, weights[:2])
+    with pytest.raises(RetargetError, match="needs the source's neutral"):
+        r.fit_residuals(frames, None, weights)
+    other = build_rig(sample_identity(1, split="test"), tessellate(n_vertices=300, kind="regular"))
+    with pytest.raises(RetargetError, match="must share a topology"):
+        r.fit_residuals(frames, Mesh(other.neutral, other.faces), weights)
+
+
 def test_refine_fits_on_one_blas_thread(r, rig, weights, monkeypatch):
     # OpenBLAS threads left spinning after a fit slow the next frame's torch encoder ~2.5x
     from threadpoolctl import threadpool_info
@@ -420,6 +448,23 @@ def test_invert_and_transfer_refine_on_the_command_line(files, tmp_path):
                 tmp_path / "t.obj", "--source-neutral", files / "neutral.obj", "--refine",
                 "--refine-steps", "1") == 0
     assert (tmp_path / "t.obj").stat().st_size > 0
+
+
+def test_invert_writes_the_fits_residuals(files, tmp_path, capsys):
+    out, res = tmp_path / "w.csv", tmp_path / "fit.csv"
+    assert _cli(files, "invert", files / "seq", "-o", out, "--source-neutral", files / "neutral.obj",
+                "--refine", "--residuals", res) == 0
+    assert "median share unexplained" in capsys.readouterr().out
+    with open(res) as f:
+        rows = list(csv.DictReader(f))
+    assert [r_["frame"] for r_ in rows] == ["0", "1", "2"]
+    for row in rows:
+        residual, motion, share = (float(row[k]) for k in ("residual_rms", "motion_rms", "unexplained"))
+        assert motion > 0 and residual >= 0 and share == pytest.approx(residual / motion, rel=1e-4)
+    # without a neutral there is no rig to measure on: refused before any work
+    res.unlink()
+    assert _cli(files, "invert", files / "seq", "-o", tmp_path / "w2.csv", "--residuals", res) == 2
+    assert "--residuals needs --source-neutral" in capsys.readouterr().err and not res.exists()
 
 
 def test_estimate_neutral_on_the_command_line(files, tmp_path, capsys):
