@@ -461,6 +461,9 @@ def test_invert_writes_the_fits_residuals(files, tmp_path, capsys):
     for row in rows:
         residual, motion, share = (float(row[k]) for k in ("residual_rms", "motion_rms", "unexplained"))
         assert motion > 0 and residual >= 0 and share == pytest.approx(residual / motion, rel=1e-4)
+    assert _cli(files, "invert", files / "seq", "-o", out, "--source-neutral", files / "neutral.obj",
+                "--residuals", out) == 2
+    assert "--residuals and -o name the same file" in capsys.readouterr().err
     # without a neutral there is no rig to measure on: refused before any work
     res.unlink()
     assert _cli(files, "invert", files / "seq", "-o", tmp_path / "w2.csv", "--residuals", res) == 2

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+from pathlib import Path
 
 import numpy as np
 
@@ -43,7 +44,10 @@ def run(args) -> int:
         inputs.append(args.source_neutral)
     check_output(args.out, inputs, formats=(".csv",))
     if args.residuals:
-        check_output(args.residuals, inputs + [args.out], formats=(".csv",))
+        check_output(args.residuals, inputs, formats=(".csv",))
+        if Path(args.residuals).resolve() == Path(args.out).resolve():
+            raise RetargetError(f"{args.residuals}: --residuals and -o name the same file; give "
+                                "the residuals their own")
     frames = load_sequence(args.frames, up=args.up, forward=args.forward, force=args.force)
     neutral = load_source_neutral(args, frames)
     print_neutral_hint(args)
