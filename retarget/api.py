@@ -645,9 +645,9 @@ class Retargeter:
         """How much of each frame the weights explain on the source's own rig (``source_rig``:
         the network's 53 shapes baked on ``source_neutral``, with the code map where the model
         has one): the RMS over vertices of the residual frame − ``BakedRig.evaluate(w)``, and of
-        the frame's motion frame − source_neutral, both (T,) float32 in the source's units. Their ratio is
-        the share of a frame's motion the weights leave unexplained (0: all of it explained; 1:
-        as far off as the neutral). Frames far above a take's median are worth a look: an
+        the frame's motion frame − source_neutral, both (T,) float32 in the source's units. Their
+        ratio is the share of a frame's motion the weights leave unexplained (0: all of it
+        explained; 1: as far off as the neutral). Frames far above a take's median are worth a look: an
         expression outside the 53 FACS shapes, a bad scan, a wrong neutral. The network's shapes
         are not the performer's exactly (docs/RESULTS.md, "What the weights' error is made of"),
         so even the true weights leave some residual. frames: a Mesh or a list sharing the
@@ -662,8 +662,9 @@ class Retargeter:
         rig = self.source_rig(source_neutral)
         baked, rest = rig.baked, rig.target.mesh.vertices
         if frames[0].vertices.shape != baked.neutral.shape:
-            raise RetargetError(f"fit_residuals: the frames have {len(frames[0].vertices)} vertices, "
-                                f"the source neutral {len(baked.neutral)}: they must share a topology")
+            raise RetargetError(f"fit_residuals: the frames have {len(frames[0].vertices)} "
+                                f"vertices, the source neutral {len(baked.neutral)}: they must "
+                                "share a topology")
         w = w.reshape(len(frames), N_FACS)
         residual, motion = np.empty(len(frames), np.float32), np.empty(len(frames), np.float32)
         for i, (frame, drawn) in enumerate(zip(frames, baked.evaluate(w))):

@@ -751,7 +751,8 @@ class Evaluation:
                                       **{f"frame_{n}": [float(x) for x in v] for n, v in b.items()}}
                                   for k, b in block.items()}
                     if "invert" in block:                  # one rig: the error over its frames
-                        entry[tag]["invert"]["weight_mae_se"] = standard_error(block["invert"]["weight_mae"])
+                        entry[tag]["invert"]["weight_mae_se"] = standard_error(
+                            block["invert"]["weight_mae"])
                 else:
                     entry[tag] = {s: {f"{k}.{n}": float(v[j]) for k, b in block.items() for n, v in b.items()}
                                   for j, s in enumerate(shapes)}
@@ -903,7 +904,8 @@ def to_markdown(results: dict) -> str:
                    "real → real and inversion have exact GT; procedural ↔ real GT is the other rig "
                    "driven by the same weights (semantic, not exact).\n")
         header = ["method", "real→real MSE (exact)", "invert: rig MSE (exact)",
-                  "invert: weight MAE ± standard error over frames (exact)", "procedural→real MSE (semantic)",
+                  "invert: weight MAE ± standard error over frames (exact)",
+                  "procedural→real MSE (semantic)",
                   "real→procedural MSE (semantic)", "animate from true weights MSE (exact)",
                   "unmoved → itself MSE (the floor, exact)"]
         keys = [("real_to_real", "mse_mm2"), ("invert", "rig_mse_mm2"), ("invert", "weight_mae"),
@@ -918,8 +920,9 @@ def to_markdown(results: dict) -> str:
                     "procedural_to_real.mse_mm2", "real_to_procedural.mse_mm2", "animate.mse_mm2"]
             rows = [[shape] + [cell("real_rig", m, "per_shape", shape, c) for c in cols]
                     for shape in r["shapes"]]
+            one_hot = [h.replace(" ± standard error over frames", "") for h in header[1:-1]]
             out.append(f"<details><summary>Real rig per ARKit shape (one-hot), {m}</summary>\n\n"
-                       + md_table(["shape"] + [h.replace(" ± standard error over frames", "") for h in header[1:-1]], rows) + "\n\n</details>\n")
+                       + md_table(["shape"] + one_hot, rows) + "\n\n</details>\n")
     if "frame" in s:
         f = s["frame"]
         out.append("### Canonical frame under crops (no method: scale / the reference's, and the "

@@ -71,7 +71,8 @@ def write_residuals_csv(path, residual: np.ndarray, motion: np.ndarray) -> np.nd
     does not move and is matched) as CSV, atomically -> the unexplained shares (T,)."""
     from ..io import atomic_output
 
-    share = np.where(motion > 0, residual / np.maximum(motion, 1e-12), np.where(residual > 0, np.inf, 0.0))
+    still = np.where(residual > 0, np.inf, 0.0)
+    share = np.where(motion > 0, residual / np.maximum(motion, 1e-12), still)
     with atomic_output(path) as tmp, open(tmp, "w", newline="") as fh:
         out = csv.writer(fh)
         out.writerow(["frame", "residual_rms", "motion_rms", "unexplained"])
