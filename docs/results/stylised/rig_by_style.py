@@ -1,7 +1,8 @@
 """How far off the bundled model's rig is on stylised heads against the others (docs/RESULTS.md,
 "Stylised heads").
 
-For each test identity (``sample_head_identity(seed, "test")``: 15 % are drawn stylised, every
+For each test identity (``sample_head_identity(seed, "test")``; ``--split val`` for validation
+identities, ``--checkpoint`` for another model than the bundled one: 15 % are drawn stylised, every
 range of their macros and modifiers widened 2.5 times), the head with its neck (decimated, 2,000
 vertices, the artist's ARKit shapes carried by deformation transfer) is baked by the bundled model
 on its own neutral (``Retargeter.source_rig``) and the median over the 53 shapes of
@@ -23,14 +24,14 @@ from data_synth.makehuman import base_head_rig, build_head_rig, head_tessellatio
 from data_synth.sampling import sample_weights
 
 
-def measure(seeds) -> list[dict]:
+def measure(seeds, split: str = "test", checkpoint: str | None = None) -> list[dict]:
     from retarget.api import Retargeter
     from retarget.mesh import Mesh
 
-    r = Retargeter.load()
+    r = Retargeter.load(checkpoint)
     out = []
     for s in seeds:
-        ident = sample_head_identity(s, "test")
+        ident = sample_head_identity(s, split)
         base = base_head_rig(ident, "arkit")
         rig = build_head_rig(base, head_tessellation(seed=s, n_vertices=2000, kind="decimated",
                                                      crop="head_neck"), 6)
@@ -50,7 +51,7 @@ def measure(seeds) -> list[dict]:
 
 
 def summary(rows: list[dict]) -> None:
-    print("| test heads | count | rig error: median | quartiles | max | weight MAE (neutral + refine): mean ± s.e. |")
+    print("| heads | count | rig error: median | quartiles | max | weight MAE (neutral + refine): mean ± s.e. |")
     print("| --- | ---: | ---: | ---: | ---: | ---: |")
     for name, keep in (("regular", False), ("stylised", True)):
         sel = [r_ for r_ in rows if r_["stylised"] == keep]
@@ -66,14 +67,16 @@ def summary(rows: list[dict]) -> None:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs=2, metavar=("FIRST", "END"), help="test seeds FIRST..END-1")
+    ap.add_argument("--seeds", type=int, nargs=2, metavar=("FIRST", "END"), help="seeds FIRST..END-1")
+    ap.add_argument("--split", default="test", help="test (default) or val (choosing models)")
+    ap.add_argument("--checkpoint", help="default: the bundled model")
     ap.add_argument("--out", help="JSON of the per-seed figures")
     ap.add_argument("--summary", nargs="+", help="JSON files of --out to summarise")
     args = ap.parse_args()
     if args.summary:
         rows = [r_ for p in args.summary for r_ in json.load(open(p))]
         return summary(rows)
-    rows = measure(range(*args.seeds))
+    rows = measure(range(*args.seeds), args.split, args.checkpoint)
     if args.out:
         with open(args.out, "w") as f:
             json.dump(rows, f, indent=1)
