@@ -16,6 +16,8 @@ import sys
 
 import numpy as np
 
+from retarget.metrics import standard_error
+
 
 def paired_rows(suites: dict, a: str, b: str) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """(row name, A's per-case errors, B's) for every suite and ARKit part both methods have."""
@@ -46,7 +48,8 @@ def main(path: str, a: str, b: str) -> None:
         if len(ea) != len(eb):
             sys.exit(f"{path}: {name}: {len(ea)} cases of {a!r} against {len(eb)} of {b!r}")
         log = np.log(eb / ea)
-        se = log.std(ddof=1) / np.sqrt(len(log)) if len(log) > 1 else float("nan")
+        se = standard_error(log)
+        se = float("nan") if se is None else se
         cell = f"{np.exp(log.mean()):.3f} × / ÷ {np.exp(se):.3f}"
         if abs(log.mean()) > 2 * se:
             cell = f"**{cell}**"

@@ -17,11 +17,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 
 from data_synth.makehuman import base_head_rig, build_head_rig, head_tessellation, sample_head_identity
 from data_synth.sampling import sample_weights
+from retarget.metrics import standard_error
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "weight_mae"))
+from breakdown import baked_and_true  # noqa: E402
 
 
 def measure(seeds, split: str = "test", checkpoint: str | None = None) -> list[dict]:
@@ -36,12 +42,10 @@ def measure(seeds, split: str = "test", checkpoint: str | None = None) -> list[d
         rig = build_head_rig(base, head_tessellation(seed=s, n_vertices=2000, kind="decimated",
                                                      crop="head_neck"), 6)
         neutral = Mesh(rig.neutral, rig.faces)
-        baked = r.source_rig(neutral).baked.deltas.reshape(53, -1)
-        true = np.asarray(rig.deltas).reshape(53, -1)
-        norm = np.linalg.norm(true, axis=1)
-        rel = np.linalg.norm(baked - true, axis=1)[norm > 0] / norm[norm > 0]
+        baked, true, norm = baked_and_true(r, rig)
+        rel = np.linalg.norm(baked - true, axis=1) / norm
         w = sample_weights(np.random.default_rng([s, 77]), 12, mode="mixed").astype(np.float32)
-        w[:, norm == 0] = 0.0                                   # shapes the rig lacks
+        w[:, ~rig.deltas.any(axis=(1, 2))] = 0.0               # shapes the rig lacks
         frames = [Mesh(f, rig.faces) for f in rig.evaluate(w)]
         inv = r.invert(frames, source_neutral=neutral, refine=True)
         out.append({"seed": s, "stylised": ident.stylised, "rig_median_rel": float(np.median(rel)),
@@ -59,10 +63,10 @@ def summary(rows: list[dict]) -> None:
             continue
         e = np.array([r_["rig_median_rel"] for r_ in sel])
         m = np.array([r_["weight_mae"] for r_ in sel])
-        se = m.std(ddof=1) / np.sqrt(len(m)) if len(m) > 1 else float("nan")
+        se = standard_error(m)
         q1, q3 = np.percentile(e, [25, 75])
         print(f"| {name} | {len(sel)} | {np.median(e):.3f} | {q1:.3f}–{q3:.3f} | {e.max():.3f} | "
-              f"{m.mean():.4f} ± {se:.4f} |")
+              f"{m.mean():.4f} ± {float('nan') if se is None else se:.4f} |")
 
 
 def main():
