@@ -7,7 +7,7 @@ range of their macros and modifiers widened 2.5 times), the head with its neck (
 vertices, the artist's ARKit shapes carried by deformation transfer) is baked by the bundled model
 on its own neutral (``Retargeter.source_rig``) and the median over the 53 shapes of
 |B̂_k − B_k| / |B_k| is taken; also invert's weight MAE with the neutral and refine on 12 frames of
-random weights (eval's mixed sampler, seeded by the identity). Per-seed lines (``--out``, JSON)
+random weights (eval's mixed sampler, seeded by the identity), beside predicting 0. Per-seed lines (``--out``, JSON)
 and a markdown summary (``--summary`` over one or more of those files):
 
     python docs/results/stylised/rig_by_style.py --seeds 0 40 --out runs/stylised/a.json
@@ -49,14 +49,14 @@ def measure(seeds, split: str = "test", checkpoint: str | None = None) -> list[d
         frames = [Mesh(f, rig.faces) for f in rig.evaluate(w)]
         inv = r.invert(frames, source_neutral=neutral, refine=True)
         out.append({"seed": s, "stylised": ident.stylised, "rig_median_rel": float(np.median(rel)),
-                    "weight_mae": float(np.abs(inv - w).mean())})
+                    "weight_mae": float(np.abs(inv - w).mean()), "predict_0_mae": float(np.abs(w).mean())})
         print(json.dumps(out[-1]), flush=True)
     return out
 
 
 def summary(rows: list[dict]) -> None:
-    print("| heads | count | rig error: median | quartiles | max | weight MAE (neutral + refine): mean ± s.e. |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    print("| heads | count | rig error: median | quartiles | max | weight MAE (neutral + refine): mean ± s.e. | predicting 0 |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for name, keep in (("regular", False), ("stylised", True)):
         sel = [r_ for r_ in rows if r_["stylised"] == keep]
         if not sel:
@@ -66,7 +66,8 @@ def summary(rows: list[dict]) -> None:
         se = standard_error(m)
         q1, q3 = np.percentile(e, [25, 75])
         print(f"| {name} | {len(sel)} | {np.median(e):.3f} | {q1:.3f}–{q3:.3f} | {e.max():.3f} | "
-              f"{m.mean():.4f} ± {float('nan') if se is None else se:.4f} |")
+              f"{m.mean():.4f} ± {float('nan') if se is None else se:.4f} | "
+              f"{np.mean([r_['predict_0_mae'] for r_ in sel]):.4f} |")
 
 
 def main():
