@@ -203,6 +203,16 @@ def _gram(a: np.ndarray) -> np.ndarray:
     return a.astype(np.float64) @ a.T.astype(np.float64)
 
 
+def _residual_rms(frames, drawn, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame the RMS over vertices of frame − drawn and of frame − rest: frames a list of
+    Mesh (T), drawn an iterable of (V,3) arrays, rest (V,3) -> two (T,) float32 arrays."""
+    residual, motion = np.empty(len(frames), np.float32), np.empty(len(frames), np.float32)
+    for i, (frame, d) in enumerate(zip(frames, drawn)):
+        residual[i] = np.sqrt(np.square(frame.vertices - d).sum(-1).mean())
+        motion[i] = np.sqrt(np.square(frame.vertices - rest).sum(-1).mean())
+    return residual, motion
+
+
 @dataclass
 class SourceRig:
     """The decoder's own rig on a source neutral, for analysis-by-synthesis (``Retargeter.refine``).
@@ -652,25 +662,42 @@ class Retargeter:
         are not the performer's exactly (docs/RESULTS.md, "What the weights' error is made of"),
         so even the true weights leave some residual. frames: a Mesh or a list sharing the
         neutral's topology; weights (53,) or (T,53), e.g. from ``invert``."""
-        if source_neutral is None:
-            raise RetargetError("fit_residuals needs the source's neutral (source_neutral=)")
-        frames, _ = source_frames(frames)
-        w = np.asarray(weights, np.float32)
-        if w.shape[-1:] != (N_FACS,) or w.size != len(frames) * N_FACS:
-            raise RetargetError(f"fit_residuals: weights of shape {w.shape} for {len(frames)} "
-                                f"frame(s); expected ({len(frames)}, {N_FACS})")
+        frames = self._residual_frames(frames, source_neutral, weights, N_FACS, "weights")
         rig = self.source_rig(source_neutral)
-        baked, rest = rig.baked, rig.target.mesh.vertices
-        if frames[0].vertices.shape != baked.neutral.shape:
-            raise RetargetError(f"fit_residuals: the frames have {len(frames[0].vertices)} "
-                                f"vertices, the source neutral {len(baked.neutral)}: they must "
-                                "share a topology")
-        w = w.reshape(len(frames), N_FACS)
-        residual, motion = np.empty(len(frames), np.float32), np.empty(len(frames), np.float32)
-        for i, (frame, drawn) in enumerate(zip(frames, baked.evaluate(w))):
-            residual[i] = np.sqrt(np.square(frame.vertices - drawn).sum(-1).mean())
-            motion[i] = np.sqrt(np.square(frame.vertices - rest).sum(-1).mean())
-        return residual, motion
+        w = np.asarray(weights, np.float32).reshape(len(frames), N_FACS)
+        return _residual_rms(frames, rig.baked.evaluate(w), rig.target.mesh.vertices)
+
+    def code_residuals(self, frames, source_neutral: Mesh, codes) -> tuple[np.ndarray, np.ndarray]:
+        """How much of each frame the codes z_GE explain on the source itself: the codes decoded on
+        ``source_neutral`` (what ``transfer`` sends to the target, drawn back on the performer),
+        as ``fit_residuals`` measures it: the RMS over vertices of frame − decoded and of frame −
+        source_neutral, both (T,) float32 in the source's units. codes (128,) or (T,128), e.g.
+        ``expression_codes(frames, source_neutral, refine=True)``."""
+        frames = self._residual_frames(frames, source_neutral, codes, self.cfg.code_dim, "codes")
+        neutral = as_mesh(source_neutral, role="source neutral")
+        baked = self._source_rigs.get((_digest(neutral.vertices), _digest(neutral.faces)))
+        target = baked.target if baked is not None else self.prepare(neutral)   # refine's, if made
+        z = np.asarray(codes, np.float32).reshape(len(frames), self.cfg.code_dim)
+        return _residual_rms(frames, self.iter_decode(target, z), target.mesh.vertices)
+
+    @staticmethod
+    def _residual_frames(frames, source_neutral, values, dims: int, what: str) -> list:
+        """The frames as a list for ``fit_residuals`` / ``code_residuals``, after checking that
+        there is a neutral, one row of ``values`` (``dims`` wide) per frame, and one topology."""
+        name = "fit_residuals" if what == "weights" else "code_residuals"
+        if source_neutral is None:
+            raise RetargetError(f"{name} needs the source's neutral (source_neutral=)")
+        frames, _ = source_frames(frames)
+        v = np.asarray(values, np.float32)
+        if v.shape[-1:] != (dims,) or v.size != len(frames) * dims:
+            raise RetargetError(f"{name}: {what} of shape {v.shape} for {len(frames)} "
+                                f"frame(s); expected ({len(frames)}, {dims})")
+        neutral = as_mesh(source_neutral, role="source neutral")
+        if frames[0].vertices.shape != neutral.vertices.shape:
+            raise RetargetError(f"{name}: the frames have {len(frames[0].vertices)} "
+                                f"vertices, the source neutral {len(neutral.vertices)}: "
+                                "they must share a topology")
+        return frames
 
     def estimate_neutral(self, frames, max_frames: int | None = None) -> Mesh:
         """The performer's neutral estimated from a take alone, for a source without its neutral

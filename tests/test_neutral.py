@@ -296,6 +296,31 @@ def test_fit_residuals_measure_what_the_weights_leave_on_the_source_rig(r, rig, 
         r.fit_residuals(frames, Mesh(other.neutral, other.faces), weights)
 
 
+def test_code_residuals_measure_what_the_codes_leave_on_the_source(r, rig, weights):
+    neutral = Mesh(rig.neutral, rig.faces)
+    z = r.weight_codes(weights, neutral)
+    frames = [Mesh(f, rig.faces) for f in r.decode(neutral, z)]
+    residual, motion = r.code_residuals(frames, neutral, z)
+    # frames the codes draw on the source itself: nothing left
+    assert residual.shape == motion.shape == (3,) and residual.max() < 1e-4 * motion.min()
+    np.testing.assert_allclose(motion, [np.sqrt(np.square(f.vertices - rig.neutral).sum(-1).mean())
+                                        for f in frames], rtol=1e-5)
+    # transfer's refined codes explain more of rig frames than the encoder's alone, and with the
+    # basis decoder leave what the weights-and-free-dims fit leaves
+    rig_frames = [Mesh(f, rig.faces) for f in rig.evaluate(weights)]
+    plain = r.code_residuals(rig_frames, neutral, r.expression_codes(rig_frames, neutral))[0]
+    refined = r.code_residuals(rig_frames, neutral,
+                               r.expression_codes(rig_frames, neutral, refine=True))[0]
+    assert np.all(refined < plain)
+    # a code of zeros leaves the frame against the decoder's own neutral, as fit_residuals does
+    np.testing.assert_allclose(r.code_residuals(rig_frames, neutral, np.zeros((3, 128)))[0],
+                               r.fit_residuals(rig_frames, neutral, np.zeros((3, 53)))[0], rtol=1e-4)
+    with pytest.raises(RetargetError, match=r"codes of shape \(3, 53\) for 3 frame\(s\)"):
+        r.code_residuals(rig_frames, neutral, weights)
+    with pytest.raises(RetargetError, match="code_residuals needs the source's neutral"):
+        r.code_residuals(rig_frames, None, z)
+
+
 def test_refine_fits_on_one_blas_thread(r, rig, weights, monkeypatch):
     # OpenBLAS threads left spinning after a fit slow the next frame's torch encoder ~2.5x
     from threadpoolctl import threadpool_info
@@ -450,17 +475,22 @@ def test_invert_and_transfer_refine_on_the_command_line(files, tmp_path):
     assert (tmp_path / "t.obj").stat().st_size > 0
 
 
+def _check_residuals_csv(path, n_frames: int) -> None:
+    """A residuals CSV: one row per frame, residual ≥ 0, motion > 0, and their ratio."""
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    assert [r_["frame"] for r_ in rows] == [str(t) for t in range(n_frames)]
+    for row in rows:
+        residual, motion, share = (float(row[k]) for k in ("residual_rms", "motion_rms", "unexplained"))
+        assert motion > 0 and residual >= 0 and share == pytest.approx(residual / motion, rel=1e-4)
+
+
 def test_invert_writes_the_fits_residuals(files, tmp_path, capsys):
     out, res = tmp_path / "w.csv", tmp_path / "fit.csv"
     assert _cli(files, "invert", files / "seq", "-o", out, "--source-neutral", files / "neutral.obj",
                 "--refine", "--residuals", res) == 0
     assert "median share unexplained" in capsys.readouterr().out
-    with open(res) as f:
-        rows = list(csv.DictReader(f))
-    assert [r_["frame"] for r_ in rows] == ["0", "1", "2"]
-    for row in rows:
-        residual, motion, share = (float(row[k]) for k in ("residual_rms", "motion_rms", "unexplained"))
-        assert motion > 0 and residual >= 0 and share == pytest.approx(residual / motion, rel=1e-4)
+    _check_residuals_csv(res, 3)
     assert _cli(files, "invert", files / "seq", "-o", out, "--source-neutral", files / "neutral.obj",
                 "--residuals", out) == 2
     assert "--residuals and -o name the same file" in capsys.readouterr().err
@@ -468,6 +498,22 @@ def test_invert_writes_the_fits_residuals(files, tmp_path, capsys):
     res.unlink()
     assert _cli(files, "invert", files / "seq", "-o", tmp_path / "w2.csv", "--residuals", res) == 2
     assert "--residuals needs --source-neutral" in capsys.readouterr().err and not res.exists()
+
+
+def test_transfer_writes_the_codes_residuals(files, tmp_path, capsys):
+    res = tmp_path / "fit.csv"
+    assert _cli(files, "transfer", files / "seq", files / "neutral.obj", "-o", tmp_path / "out",
+                "--source-neutral", files / "neutral.obj", "--refine", "--residuals", res) == 0
+    assert "median share unexplained" in capsys.readouterr().out
+    _check_residuals_csv(res, 3)
+    # refused before any work: no neutral, or a residuals file that is not a CSV
+    res.unlink()
+    assert _cli(files, "transfer", files / "seq", files / "neutral.obj", "-o", tmp_path / "out2",
+                "--residuals", res) == 2
+    assert "--residuals needs --source-neutral" in capsys.readouterr().err
+    assert _cli(files, "transfer", files / "seq", files / "neutral.obj", "-o", tmp_path / "out3",
+                "--source-neutral", files / "neutral.obj", "--residuals", tmp_path / "fit.obj") == 2
+    assert not res.exists() and not (tmp_path / "out2").exists() and not (tmp_path / "out3").exists()
 
 
 def test_estimate_neutral_on_the_command_line(files, tmp_path, capsys):

@@ -45,6 +45,49 @@ def add_neutral_args(p) -> None:
                         "steps (default 0); a basis decoder always solves them exactly")
 
 
+def add_residuals_arg(p, what: str) -> None:
+    """--residuals CSV: how well ``what`` (the weights, the codes) explain each source frame."""
+    p.add_argument("--residuals", metavar="CSV",
+                   help=f"also write how well {what} explain each frame on the source's own "
+                        "neutral (RMS residual and motion in the frames' units, and their ratio, the "
+                        "share left unexplained); needs --source-neutral or --estimate-neutral")
+
+
+def check_residuals_arg(args, inputs: list) -> None:
+    """RetargetError, before any work, for --residuals without a neutral, onto an input, not a .csv,
+    or onto the -o output itself."""
+    if not args.residuals:
+        return
+    if not (args.source_neutral or args.estimate_neutral):
+        raise RetargetError("--residuals needs --source-neutral (the source's neutral mesh) or "
+                            "--estimate-neutral: the residual is measured on the source's neutral")
+    check_output(args.residuals, inputs, formats=(".csv",))
+    if Path(args.residuals).resolve() == Path(args.out).resolve():
+        raise RetargetError(f"{args.residuals}: --residuals and -o name the same file; give "
+                            "the residuals their own")
+
+
+def write_residuals(path, residual: np.ndarray, motion: np.ndarray) -> np.ndarray:
+    """Write frame, residual_rms, motion_rms, unexplained (residual ÷ motion; 0 for a frame that
+    does not move and is matched) as CSV, atomically, and print the median share and the worst
+    frames -> the unexplained shares (T,)."""
+    import csv
+
+    from ..io import atomic_output
+
+    still = np.where(residual > 0, np.inf, 0.0)
+    share = np.where(motion > 0, residual / np.maximum(motion, 1e-12), still)
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["frame", "residual_rms", "motion_rms", "unexplained"])
+        for t, row in enumerate(zip(residual, motion, share)):
+            out.writerow([str(t)] + [f"{x:.6g}" for x in row])
+    worst = np.argsort(-share)[:3]
+    print(f"wrote the fit's residuals to {path}: median share unexplained {np.median(share):.3f}; "
+          "worst frames " + ", ".join(f"{i} ({share[i]:.3f})" for i in worst))
+    return share
+
+
 def check_neutral_args(args) -> None:
     """RetargetError for --refine without a neutral (--source-neutral or --estimate-neutral), for
     both of those, or a negative --refine-steps."""

@@ -1,16 +1,18 @@
 """``retarget transfer``: clone the expression(s) of a source mesh or sequence onto a target."""
 from __future__ import annotations
 
-from ._common import (add_model_args, add_neutral_args, add_smooth_arg, check_neutral_args,
-                      estimated_neutral, load_source_neutral, output_paths, print_neutral_hint,
-                      retargeter, write_frames)
+from ._common import (add_model_args, add_neutral_args, add_residuals_arg, add_smooth_arg,
+                      check_neutral_args, check_residuals_arg, estimated_neutral,
+                      load_source_neutral, output_paths, print_neutral_hint, retargeter,
+                      write_frames, write_residuals)
 
 HELP = "clone expression(s) of SRC (a mesh, a folder or a glob of frames) onto the neutral TGT"
 EXAMPLE = """retarget transfer actor/frame_0001.obj character_neutral.obj -o smile.obj
 retarget transfer "capture/*.obj" character_neutral.obj -o out_frames/ --smooth savgol
 retarget transfer capture/ character_neutral.obj -o performance.glb --source-neutral actor_neutral.obj
 retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine
-retarget transfer capture/ character_neutral.obj -o out/ --estimate-neutral --refine"""
+retarget transfer capture/ character_neutral.obj -o out/ --estimate-neutral --refine
+retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine --residuals fit.csv"""
 
 
 def add_arguments(p):
@@ -18,6 +20,7 @@ def add_arguments(p):
     p.add_argument("target", help="target neutral mesh (any topology)")
     p.add_argument("-o", "--out", required=True, help="output .obj/.ply (one frame), .glb, or a folder")
     add_neutral_args(p)
+    add_residuals_arg(p, "the codes sent to the target")
     p.add_argument("--format", choices=("obj", "ply"), default="obj", help="frame files in a folder")
     add_smooth_arg(p)
     add_model_args(p)
@@ -32,6 +35,7 @@ def run(args) -> int:
         inputs.append(args.source_neutral)
     frames = load_sequence(args.source, up=args.up, forward=args.forward, force=args.force)
     output_paths(args.out, len(frames), inputs, args.format)
+    check_residuals_arg(args, inputs)
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
     output_paths(args.out, len(frames), inputs, args.format, target.n_vertices,   # the take's
                  len(target.faces), args.force)                                   # size, up front
@@ -47,4 +51,6 @@ def run(args) -> int:
                            args, fps=args.fps, n_frames=len(z))
     print(f"wrote {len(frames)} frame(s) on {target.n_vertices} target vertices to "
           f"{written[0] if len(written) == 1 else args.out}")
+    if args.residuals:
+        write_residuals(args.residuals, *r.code_residuals(frames, neutral, z))
     return 0

@@ -4,7 +4,9 @@ each, 12 frames, seed 0) against its visemes, which the artist sculpted apart fr
 shapes (viseme_sil, the rest pose, left out). The bundled model, the rig's neutral as the source
 neutral, refine; beside it what weights 0 leave (doing nothing: the frame against the rig's
 neutral) and what the artist's own 52 shapes leave (bounded least squares in [0, 1] on the true
-shapes: a network with the performer's exact rig would report this).
+shapes: a network with the performer's exact rig would report this). The last columns are what
+`retarget transfer --residuals` reports: the codes transfer sends (neutral and refine: the weights
+and the free dims fitted together) drawn back on the rig's neutral.
 
     python docs/results/residuals/visemes.py
 """
@@ -35,16 +37,18 @@ def true_rig_share(frame: Mesh) -> float:
 
 r = Retargeter.load()
 neutral = Mesh(neutral_v, faces)
-print("| frames | share unexplained, bundled model: median | min | max | weights 0: median | the artist's own shapes: median | max | motion RMS, median (cm) |")
-print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+print("| frames | share unexplained, bundled model: median | min | max | weights 0: median | the artist's own shapes: median | max | motion RMS, median (cm) | transfer's codes: median | max |")
+print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
 for name, frames in takes.items():
     w = r.invert(frames, source_neutral=neutral, refine=True)
     residual, motion = r.fit_residuals(frames, neutral, w)
     share = residual / motion
     nothing = r.fit_residuals(frames, neutral, np.zeros_like(w))[0] / motion
     own = np.array([true_rig_share(f) for f in frames])
+    sent = r.code_residuals(frames, neutral, r.expression_codes(frames, neutral, refine=True))[0] / motion
     print(f"| {name} | {np.median(share):.3f} | {share.min():.3f} | {share.max():.3f} | "
-          f"{np.median(nothing):.3f} | {np.median(own):.3f} | {own.max():.3f} | {np.median(motion):.3f} |")
+          f"{np.median(nothing):.3f} | {np.median(own):.3f} | {own.max():.3f} | {np.median(motion):.3f} | "
+          f"{np.median(sent):.3f} | {sent.max():.3f} |")
 names = [str(d["viseme_names"][i]) for i in moving]
 print("\nvisemes, bundled model (the artist's shapes), worst first: "
       + ", ".join(f"{n} {s:.3f} ({o:.3f})" for n, s, o in sorted(zip(names, share, own), key=lambda x: -x[1])))
