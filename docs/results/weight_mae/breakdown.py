@@ -72,10 +72,19 @@ VARIANTS = {
     **{f"joint, prior {p}, sparsity {s0}": {"REFINE_JOINT_INVERT": True, "REFINE_PRIOR_INVERT": p,
                                             "REFINE_SPARSITY_INVERT": s0}
        for p in (0.01, 0.1) for s0 in (0.0, 0.002, 0.02)},
+    # the retune on the larger validation sample (validation_large.yaml: 40 + 40 validation
+    # identities, 120 ARKit frames), around the code map's retune: weaker priors and pulls too
+    **{f"prior {p}, sparsity {s0}, reweight {mu}": {
+        "REFINE_PRIOR_INVERT": p, "REFINE_SPARSITY_INVERT": s0,
+        "REFINE_REWEIGHT_INVERT": (mu, 0.05, 2) if mu else ()}
+       for p in (0.002, 0.005, 0.01, 0.02) for s0 in (0.0, 0.001, 0.002) for mu in (0.0, 0.02)},
 }
 #: the variants of the code map's retune (``--variants`` of its command in docs/RESULTS.md)
 CODE_MAP_RETUNE = ["fit before the code map's retune"] + [f"prior {p}, sparsity {s0}, reweight {mu}" for p in (0.005, 0.01, 0.02)
                                  for s0 in (0.002, 0.005, 0.01) for mu in (0.02, 0.05)]
+#: the variants of the retune on the larger validation sample (``--variants validation-retune``)
+VALIDATION_RETUNE = ["bundled"] + [f"prior {p}, sparsity {s0}, reweight {mu}" for p in (0.002, 0.005, 0.01, 0.02)
+                                   for s0 in (0.0, 0.001, 0.002) for mu in (0.0, 0.02)]
 
 
 def row_kind(w: np.ndarray) -> str:
@@ -172,12 +181,14 @@ def main():
     ap.add_argument("--test", action="store_true", help="the eval's test set instead of the tuning set")
     ap.add_argument("--config", default=None, help="an eval config instead (e.g. configs/eval/validation.yaml)")
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS),
-                    help="names of VARIANTS, or 'code-map-retune' for CODE_MAP_RETUNE")
+                    help="names of VARIANTS, or 'code-map-retune' / 'validation-retune' for those lists")
     ap.add_argument("--shapes", action="store_true", help="also the baked rig's relative error per shape")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     if args.variants == ["code-map-retune"]:
         args.variants = CODE_MAP_RETUNE
+    elif args.variants == ["validation-retune"]:
+        args.variants = VALIDATION_RETUNE
     if args.config:
         cfg = load_eval_config(args.config)
     elif args.test:
