@@ -42,7 +42,9 @@ SEED_RADIUS = 0.1         # components of the face front reaching this fraction 
 SLICE_BANDS = 64          # horizontal slices of the mesh's height for finding the shoulders
 SHOULDER_GAIN = 1.4       # the shoulders: the first slice wider than the head and this many times
                           # as wide as the neck ...
-SHOULDER_MIN_DEPTH = 0.6  # ... at least this many head widths below the top (past the crown)
+SHOULDER_MIN_DEPTH = 0.6  # ... at least this many head widths below the top (past the crown),
+SHOULDER_MIN_HEAD = 0.2   # ... under a head at least this share of the slice's width (not a lone
+                          # vertex or spike at the top of a tilted face mask)
 #: Canonical width of the face front (the scale) and canonical position of the face point (the
 #: nose tip, at the front's mid x): chosen so the face frame of procedural full heads is within a
 #: few per cent of their bounding-box frame.
@@ -120,8 +122,11 @@ def shoulder_depth(vertices: np.ndarray, faces: np.ndarray) -> float:
     ``SLICE_BANDS`` horizontal slices of the mesh's height; the shoulders are the first slice wider
     (x extent) than every slice above it and ``SHOULDER_GAIN`` times as wide as the narrowest slice
     between it and the widest one above (the neck), at least ``SHOULDER_MIN_DEPTH`` head widths
-    below the top (the crown's slices widen fast). A head, a face mask or a head with its neck has
-    none. vertices (V,3) float64, faces (F,3) int -> depth in the vertices' units."""
+    below the top (the crown's slices widen fast), under a head at least ``SHOULDER_MIN_HEAD`` of
+    its width (a face mask whose top is one vertex above the rest, as a tilted straight cut gives,
+    has a first slice of nearly no width: the next one is no shoulder). A head, a face mask or a
+    head with its neck has none. vertices (V,3) float64, faces (F,3) int -> depth in the
+    vertices' units."""
     top = vertices[:, 1].max()
     band = max(float(top - vertices[:, 1].min()), 1e-300) / SLICE_BANDS
     # the corners, and samples of the triangles whose xy box is longer than a slice (the others
@@ -144,7 +149,8 @@ def shoulder_depth(vertices: np.ndarray, faces: np.ndarray) -> float:
         if not np.isfinite(width):
             continue
         if width > head:
-            if head > 0 and width > SHOULDER_GAIN * neck and i * band >= SHOULDER_MIN_DEPTH * head:
+            if (head >= SHOULDER_MIN_HEAD * width and width > SHOULDER_GAIN * neck
+                    and i * band >= SHOULDER_MIN_DEPTH * head):
                 return float(i * band)
             head = neck = float(width)
         neck = min(neck, float(width))

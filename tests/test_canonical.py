@@ -141,6 +141,30 @@ def test_face_frame_of_a_bust_with_a_wide_or_short_head_stops_at_the_shoulders(s
     assert np.linalg.norm(p_bust - p_head) < 0.5                         # cm
 
 
+def test_face_mask_with_a_sliver_on_top_has_no_shoulders():
+    """A face mask with something narrow above its top: a sliver triangle (a stray scrap of a scan,
+    or the one vertex a tilted straight cut leaves on top: training's small rotations of a face
+    crop made one). Its first slice had nearly no width, and the next slice, the whole top of the
+    mask, was read as a bust's shoulders a slice below the top; the head window then held the
+    forehead alone, the face front was empty, and "no surface faces forward" stopped a training
+    run. The frame must be the mask's own."""
+    from data_synth.makehuman import (base_head_rig, build_head_rig, head_tessellation,
+                                      sample_head_identity)
+    from retarget.canonical import SLICE_BANDS, fit_face_frame, shoulder_depth
+
+    rig = build_head_rig(base_head_rig(sample_head_identity(0, "test"), "arkit"),
+                         head_tessellation(seed=0, n_vertices=1800, kind="decimated", crop="face"), 6)
+    v, f = rig.neutral.astype(np.float64), rig.faces
+    band = np.ptp(v[:, 1]) / SLICE_BANDS
+    top = v[np.argmax(v[:, 1])]
+    sliver = top + np.array([[-0.05, 1.2 * band, 0.0], [0.05, 1.2 * band, 0.0], [0.0, 0.9 * band, 0.0]])
+    vs, fs = np.vstack([v, sliver]), np.vstack([f, [[len(v), len(v) + 1, len(v) + 2]]])
+    assert shoulder_depth(v, f) == np.inf
+    assert shoulder_depth(vs, fs) == np.inf
+    (p0, w0), (p1, w1) = fit_face_frame(v, f), fit_face_frame(vs, fs)
+    assert abs(w1 / w0 - 1) < 0.02 and np.linalg.norm(p1 - p0) < 0.2   # cm
+
+
 def test_frame_kind_errors():
     v, f = procedural(0, 600, "regular", "full")
     with pytest.raises(ValueError, match="unknown canonical frame"):
