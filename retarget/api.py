@@ -203,6 +203,31 @@ def _gram(a: np.ndarray) -> np.ndarray:
     return a.astype(np.float64) @ a.T.astype(np.float64)
 
 
+def _rig_key(neutral: Mesh) -> tuple:
+    """The key of a source neutral's baked rig in ``Retargeter._source_rigs``: its content."""
+    return _digest(neutral.vertices), _digest(neutral.faces)
+
+
+def _residual_frames(frames, source_neutral, values, dims: int, name: str,
+                     what: str) -> tuple[list, Mesh]:
+    """(the frames as a list, the source neutral as a Mesh) for ``name`` (``fit_residuals``,
+    ``code_residuals``), after checking that there is a neutral, one row of ``values`` (``what``,
+    ``dims`` wide) per frame, and one topology."""
+    if source_neutral is None:
+        raise RetargetError(f"{name} needs the source's neutral (source_neutral=)")
+    frames, _ = source_frames(frames)
+    v = np.asarray(values, np.float32)
+    if v.shape[-1:] != (dims,) or v.size != len(frames) * dims:
+        raise RetargetError(f"{name}: {what} of shape {v.shape} for {len(frames)} "
+                            f"frame(s); expected ({len(frames)}, {dims})")
+    neutral = as_mesh(source_neutral, role="source neutral")
+    if frames[0].vertices.shape != neutral.vertices.shape:
+        raise RetargetError(f"{name}: the frames have {len(frames[0].vertices)} "
+                            f"vertices, the source neutral {len(neutral.vertices)}: "
+                            "they must share a topology")
+    return frames, neutral
+
+
 def _residual_rms(frames, drawn, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per frame the RMS over vertices of frame − drawn and of frame − rest: frames a list of
     Mesh (T), drawn an iterable of (V,3) arrays, rest (V,3) -> two (T,) float32 arrays."""
@@ -581,7 +606,7 @@ class Retargeter:
         """The 53 one-hot shapes decoded on ``source_neutral`` and their factorised normal equations,
         made once per neutral (cached by content, the last ``SOURCE_RIGS_KEPT``)."""
         source_neutral = as_mesh(source_neutral, role="source neutral")
-        key = (_digest(source_neutral.vertices), _digest(source_neutral.faces))
+        key = _rig_key(source_neutral)
         if key not in self._source_rigs:
             target = self.prepare(source_neutral)
             while len(self._source_rigs) >= self.SOURCE_RIGS_KEPT:
@@ -662,8 +687,9 @@ class Retargeter:
         are not the performer's exactly (docs/RESULTS.md, "What the weights' error is made of"),
         so even the true weights leave some residual. frames: a Mesh or a list sharing the
         neutral's topology; weights (53,) or (T,53), e.g. from ``invert``."""
-        frames = self._residual_frames(frames, source_neutral, weights, N_FACS, "weights")
-        rig = self.source_rig(source_neutral)
+        frames, neutral = _residual_frames(frames, source_neutral, weights, N_FACS, "fit_residuals",
+                                           "weights")
+        rig = self.source_rig(neutral)
         w = np.asarray(weights, np.float32).reshape(len(frames), N_FACS)
         return _residual_rms(frames, rig.baked.evaluate(w), rig.target.mesh.vertices)
 
@@ -673,31 +699,12 @@ class Retargeter:
         as ``fit_residuals`` measures it: the RMS over vertices of frame − decoded and of frame −
         source_neutral, both (T,) float32 in the source's units. codes (128,) or (T,128), e.g.
         ``expression_codes(frames, source_neutral, refine=True)``."""
-        frames = self._residual_frames(frames, source_neutral, codes, self.cfg.code_dim, "codes")
-        neutral = as_mesh(source_neutral, role="source neutral")
-        baked = self._source_rigs.get((_digest(neutral.vertices), _digest(neutral.faces)))
-        target = baked.target if baked is not None else self.prepare(neutral)   # refine's, if made
+        frames, neutral = _residual_frames(frames, source_neutral, codes, self.cfg.code_dim,
+                                           "code_residuals", "codes")
+        rig = self._source_rigs.get(_rig_key(neutral))
+        target = rig.target if rig is not None else self.prepare(neutral)   # refine's, if made
         z = np.asarray(codes, np.float32).reshape(len(frames), self.cfg.code_dim)
         return _residual_rms(frames, self.iter_decode(target, z), target.mesh.vertices)
-
-    @staticmethod
-    def _residual_frames(frames, source_neutral, values, dims: int, what: str) -> list:
-        """The frames as a list for ``fit_residuals`` / ``code_residuals``, after checking that
-        there is a neutral, one row of ``values`` (``dims`` wide) per frame, and one topology."""
-        name = "fit_residuals" if what == "weights" else "code_residuals"
-        if source_neutral is None:
-            raise RetargetError(f"{name} needs the source's neutral (source_neutral=)")
-        frames, _ = source_frames(frames)
-        v = np.asarray(values, np.float32)
-        if v.shape[-1:] != (dims,) or v.size != len(frames) * dims:
-            raise RetargetError(f"{name}: {what} of shape {v.shape} for {len(frames)} "
-                                f"frame(s); expected ({len(frames)}, {dims})")
-        neutral = as_mesh(source_neutral, role="source neutral")
-        if frames[0].vertices.shape != neutral.vertices.shape:
-            raise RetargetError(f"{name}: the frames have {len(frames[0].vertices)} "
-                                f"vertices, the source neutral {len(neutral.vertices)}: "
-                                "they must share a topology")
-        return frames
 
     def estimate_neutral(self, frames, max_frames: int | None = None) -> Mesh:
         """The performer's neutral estimated from a take alone, for a source without its neutral

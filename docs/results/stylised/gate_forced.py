@@ -2,7 +2,7 @@
 
 The bundled model gives each head its code map as far as the gate on its identity code calls it
 MakeHuman-like (``retarget.code_map``); some stylised heads get p well under 1. For each stylised
-identity of the split (seeds ``--seeds A B``; the head of rig_by_style.py: head with neck, 2,000
+identity of the split (seeds ``--seeds A B``; rig_by_style.head_case: head with neck, 2,000
 vertices, the artist's ARKit shapes), the baked rig's median relative error and invert's weight
 MAE (neutral + refine, 12 frames of the eval's mixed sampler) with the gate as bundled and with
 p forced to 1 (the MakeHuman map on every head), beside predicting 0:
@@ -17,15 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
-from data_synth.makehuman import base_head_rig, build_head_rig, head_tessellation, sample_head_identity
-from data_synth.sampling import sample_weights
+from data_synth.makehuman import sample_head_identity
 from retarget.api import Retargeter
 from retarget.code_map import gate_probability
-from retarget.mesh import Mesh
 from retarget.metrics import standard_error
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "weight_mae"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 from breakdown import baked_and_true  # noqa: E402
+from rig_by_style import head_case  # noqa: E402
 
 
 def main():
@@ -40,15 +40,9 @@ def main():
     print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     rows = []
     for s in range(*args.seeds):
-        ident = sample_head_identity(s, args.split)
-        if not ident.stylised:
+        if not sample_head_identity(s, args.split).stylised:
             continue
-        rig = build_head_rig(base_head_rig(ident, "arkit"), head_tessellation(
-            seed=s, n_vertices=2000, kind="decimated", crop="head_neck"), 6)
-        neutral = Mesh(rig.neutral, rig.faces)
-        w = sample_weights(np.random.default_rng([s, 77]), 12, mode="mixed").astype(np.float32)
-        w[:, ~rig.deltas.any(axis=(1, 2))] = 0.0               # shapes the rig lacks
-        frames = [Mesh(f, rig.faces) for f in rig.evaluate(w)]
+        _, rig, neutral, w, frames = head_case(s, args.split)
         row = [gate_probability(gates["bundled gate"], r.prepare(neutral).codes.z_id.numpy())]
         for gate in gates.values():
             r.code_map_gate = gate                               # drops the rigs baked so far
@@ -62,9 +56,12 @@ def main():
     a = np.array(rows)
     for name, sel in (("all stylised", np.ones(len(a), bool)), ("gate p < 0.95", a[:, 0] < 0.95)):
         m = a[sel]
+        if not len(m):
+            continue
+        se = [float("nan") if e is None else e for e in (standard_error(m[:, 3]), standard_error(m[:, 4]))]
         print(f"| {name} ({len(m)}) | | median {np.median(m[:, 1]):.3f} | {np.median(m[:, 2]):.3f} | "
-              f"{m[:, 3].mean():.4f} ± {standard_error(m[:, 3]):.4f} | "
-              f"{m[:, 4].mean():.4f} ± {standard_error(m[:, 4]):.4f} | {m[:, 5].mean():.4f} |")
+              f"{m[:, 3].mean():.4f} ± {se[0]:.4f} | "
+              f"{m[:, 4].mean():.4f} ± {se[1]:.4f} | {m[:, 5].mean():.4f} |")
 
 
 if __name__ == "__main__":

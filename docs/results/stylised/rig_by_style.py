@@ -30,23 +30,29 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "weight_mae"))
 from breakdown import baked_and_true  # noqa: E402
 
 
+def head_case(seed: int, split: str):
+    """Identity ``seed`` of ``split``: (its HeadIdentity, its rig on the head with neck (decimated,
+    2,000 vertices, the artist's ARKit shapes), the neutral as a Mesh, 12 weight rows (12, 53) of
+    the eval's mixed sampler seeded by the identity (0 on shapes the rig lacks), their frames)."""
+    from retarget.mesh import Mesh
+
+    ident = sample_head_identity(seed, split)
+    rig = build_head_rig(base_head_rig(ident, "arkit"), head_tessellation(
+        seed=seed, n_vertices=2000, kind="decimated", crop="head_neck"), 6)
+    w = sample_weights(np.random.default_rng([seed, 77]), 12, mode="mixed").astype(np.float32)
+    w[:, ~rig.deltas.any(axis=(1, 2))] = 0.0               # shapes the rig lacks
+    return ident, rig, Mesh(rig.neutral, rig.faces), w, [Mesh(f, rig.faces) for f in rig.evaluate(w)]
+
+
 def measure(seeds, split: str = "test", checkpoint: str | None = None) -> list[dict]:
     from retarget.api import Retargeter
-    from retarget.mesh import Mesh
 
     r = Retargeter.load(checkpoint)
     out = []
     for s in seeds:
-        ident = sample_head_identity(s, split)
-        base = base_head_rig(ident, "arkit")
-        rig = build_head_rig(base, head_tessellation(seed=s, n_vertices=2000, kind="decimated",
-                                                     crop="head_neck"), 6)
-        neutral = Mesh(rig.neutral, rig.faces)
+        ident, rig, neutral, w, frames = head_case(s, split)
         baked, true, norm = baked_and_true(r, rig)
         rel = np.linalg.norm(baked - true, axis=1) / norm
-        w = sample_weights(np.random.default_rng([s, 77]), 12, mode="mixed").astype(np.float32)
-        w[:, ~rig.deltas.any(axis=(1, 2))] = 0.0               # shapes the rig lacks
-        frames = [Mesh(f, rig.faces) for f in rig.evaluate(w)]
         inv = r.invert(frames, source_neutral=neutral, refine=True)
         out.append({"seed": s, "stylised": ident.stylised, "rig_median_rel": float(np.median(rel)),
                     "weight_mae": float(np.abs(inv - w).mean()), "predict_0_mae": float(np.abs(w).mean())})

@@ -36,6 +36,9 @@ def _before(**attributes) -> dict:
     return {**FIT_BEFORE_CODE_MAP, **attributes}
 
 
+#: (prior, sparsity, reweight μ_max) of the retune on the larger validation sample
+VALIDATION_GRID = [(p, s0, mu) for p in (0.002, 0.005, 0.01, 0.02) for s0 in (0.0, 0.001, 0.002)
+                   for mu in (0.0, 0.02)]
 #: name -> Retargeter attributes (the rest as bundled; "bundled": the fit the loaded checkpoint gets,
 #: Retargeter.REFINE_INVERT_FITS: the one tuned for the code map when it has one)
 VARIANTS = {
@@ -77,14 +80,13 @@ VARIANTS = {
     **{f"prior {p}, sparsity {s0}, reweight {mu}": {
         "REFINE_PRIOR_INVERT": p, "REFINE_SPARSITY_INVERT": s0,
         "REFINE_REWEIGHT_INVERT": (mu, 0.05, 2) if mu else ()}
-       for p in (0.002, 0.005, 0.01, 0.02) for s0 in (0.0, 0.001, 0.002) for mu in (0.0, 0.02)},
+       for p, s0, mu in VALIDATION_GRID},
 }
 #: the variants of the code map's retune (``--variants`` of its command in docs/RESULTS.md)
 CODE_MAP_RETUNE = ["fit before the code map's retune"] + [f"prior {p}, sparsity {s0}, reweight {mu}" for p in (0.005, 0.01, 0.02)
                                  for s0 in (0.002, 0.005, 0.01) for mu in (0.02, 0.05)]
 #: the variants of the retune on the larger validation sample (``--variants validation-retune``)
-VALIDATION_RETUNE = ["bundled"] + [f"prior {p}, sparsity {s0}, reweight {mu}" for p in (0.002, 0.005, 0.01, 0.02)
-                                   for s0 in (0.0, 0.001, 0.002) for mu in (0.0, 0.02)]
+VALIDATION_RETUNE = ["bundled"] + [f"prior {p}, sparsity {s0}, reweight {mu}" for p, s0, mu in VALIDATION_GRID]
 
 
 def row_kind(w: np.ndarray) -> str:
