@@ -478,7 +478,7 @@ def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
 #: training/NAME -> its config: a shipped name (configs/train/NAME.yaml) or a study's file
 COMMITTED_STATES = {"stage17": "realistic_rig_heavier", "stage18": "realistic_rig_heavier",
                     "ablation_no_neutral": "realistic_rig_heavier_no_neutral",
-                    "authored6k": "docs/results/authored_targets/authored.yaml"}
+                    "stage19": "realistic_rig_authored"}
 
 
 def test_every_committed_state_is_listed():
@@ -489,7 +489,7 @@ def test_every_committed_state_is_listed():
 
 @pytest.mark.parametrize("name", sorted(COMMITTED_STATES))
 def test_committed_resumable_state_resumes_under_its_config(tmp_path, name):
-    """training/NAME (stage17: the bundled model's run) resumes under its config with the command
+    """training/NAME (stage19: the bundled model's run) resumes under its config with the command
     its README gives: its model is the config's, its optimizer loads, and its step is that of the
     last row of its log, or a few steps past it for a run stopped by Ctrl-C."""
     import csv
