@@ -12,12 +12,10 @@
 # SKIP_INSTALL=1 for a dry run here, e.g. (the tiny model of the smoke test as INIT):
 #   PATH=.venv/bin:$PATH SKIP_INSTALL=1 CONFIG=tiny INIT=/tmp/smoke/model.pt WORKERS=1 TRAIN_S=10 MEASURE_STEPS=10 OUT=/tmp/gpu_out bash training/gpu/run.sh
 set -uo pipefail
-CONFIG=${CONFIG:-realistic_rig_heavier}   # the bundled model's config (stage 16 on)
-# (the bundled model also has a gated code map: after the run, on this machine,
-#  cp -r <the run's folder> runs/x && retarget train --config realistic_rig_heavier_gated_map
-#  --steps <its steps> --out runs/x --resume exports it with the map, without a training step)
-INIT=${INIT:-retarget/checkpoints/default.pt}
-LR=${LR:-5e-5}
+CONFIG=${CONFIG:-realistic_rig_authored}   # the bundled model's config (stage 19; its export
+# fits the gated code map, about a minute, so model.pt comes back with it)
+INIT=${INIT:-retarget/checkpoints/default.pt}   # --init takes the network only, not its map
+LR=${LR:-2e-5}   # stage 19's: fresh schedules from stage 17 at 5e-5 and 1e-4 lost (RESULTS "Stage 18")
 WORKERS=${WORKERS:-14}
 TRAIN_S=${TRAIN_S:-360}
 MEASURE_STEPS=${MEASURE_STEPS:-60}
@@ -59,9 +57,12 @@ rows = list(csv.DictReader(open(sys.argv[1])))
 print(f"{float(rows[-1]['step']) / float(rows[-1]['elapsed_s']):.3f}")
 PY
 }
+# the measuring runs export without the code map (fitting it takes about a minute a run)
+case "$CONFIG" in */*|*.yaml) CONFIG_FILE=$(realpath "$CONFIG") ;; *) CONFIG_FILE=$PWD/configs/train/$CONFIG.yaml ;; esac
+printf 'base: %s\ncode_map: {identities: 0}\n' "$CONFIG_FILE" > /tmp/measure_config.yaml
 for w in 0 "$WORKERS"; do
   stamp "measure: $MEASURE_STEPS steps of $CONFIG with data_workers $w"
-  train --config "$CONFIG" --init "$INIT" --steps "$MEASURE_STEPS" --lr "$LR" --data-workers "$w" \
+  train --config /tmp/measure_config.yaml --init "$INIT" --steps "$MEASURE_STEPS" --lr "$LR" --data-workers "$w" \
     --out "/tmp/measure_$w" > "/tmp/measure_$w.txt" 2>&1 || { tail -20 "/tmp/measure_$w.txt"; exit 1; }
   stamp "steps/s with $w workers: $(rate /tmp/measure_$w/train_log.csv)"
 done
