@@ -475,10 +475,11 @@ def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
 
 
 # each committed state (training/README.md) and the config its README resumes it under
-#: training/NAME -> its config: a shipped name (configs/train/NAME.yaml) or a study's file
-COMMITTED_STATES = {"stage17": "realistic_rig_heavier", "stage18": "realistic_rig_heavier",
-                    "ablation_no_neutral": "realistic_rig_heavier_no_neutral",
-                    "stage19": "realistic_rig_authored"}
+#: training/NAME -> its config file, relative to the repository
+COMMITTED_STATES = {"stage17": "configs/train/realistic_rig_heavier.yaml",
+                    "stage18": "configs/train/realistic_rig_heavier.yaml",
+                    "ablation_no_neutral": "configs/train/realistic_rig_heavier_no_neutral.yaml",
+                    "stage19": "configs/train/realistic_rig_authored.yaml"}
 
 
 def test_every_committed_state_is_listed():
@@ -497,8 +498,7 @@ def test_committed_resumable_state_resumes_under_its_config(tmp_path, name):
     state_dir = ROOT / "training" / name
     run = tmp_path / "next"
     shutil.copytree(state_dir, run)
-    spec = COMMITTED_STATES[name]
-    cfg = load_config(ROOT / spec if spec.endswith(".yaml") else ROOT / "configs" / "train" / f"{spec}.yaml")
+    cfg = load_config(ROOT / COMMITTED_STATES[name])
     cfg["train"]["seed"] = 1
     trainer = Trainer(cfg, run, progress=False)
     assert trainer.resume()

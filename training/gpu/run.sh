@@ -58,7 +58,8 @@ print(f"{float(rows[-1]['step']) / float(rows[-1]['elapsed_s']):.3f}")
 PY
 }
 # the measuring runs export without the code map (fitting it takes about a minute a run)
-case "$CONFIG" in */*|*.yaml) CONFIG_FILE=$(realpath "$CONFIG") ;; *) CONFIG_FILE=$PWD/configs/train/$CONFIG.yaml ;; esac
+CONFIG_FILE=$(python3 -c 'import sys; from retarget.config import find_config
+print(find_config(sys.argv[1], "train").resolve())' "$CONFIG") || exit 1
 printf 'base: %s\ncode_map: {identities: 0}\n' "$CONFIG_FILE" > /tmp/measure_config.yaml
 for w in 0 "$WORKERS"; do
   stamp "measure: $MEASURE_STEPS steps of $CONFIG with data_workers $w"
