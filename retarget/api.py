@@ -39,7 +39,7 @@ from data_synth.facs import FACS_INDEX, N_FACS
 from nets.geometry import Operators, TorchOperators, load_or_compute_operators, vertex_normals
 from nets.model import NFSModel, TargetCodes, weights_to_code
 
-from .canonical import Canonicaliser
+from .canonical import Canonicaliser, upright_rotation
 from .checkpoint import checkpoint_code_map, load_checkpoint, model_from_checkpoint
 from .code_map import check_code_map, check_gate, head_code_map
 from .decimate import cluster_decimate, cluster_means
@@ -359,6 +359,8 @@ class Retargeter:
     proxy_vertices: meshes above this are encoded on a vertex-clustered proxy. chunk: vertices
     decoded at once. cache_dir: the on-disk operator cache (``nets.geometry``). source_cache_size:
     source topologies whose operators are kept in memory across calls (``encode``; 0 = none).
+    upright: turn heads tilted from facing +z upright before the network sees them, and the
+    results back (``canonicaliser``; False: every mesh as it faces).
     """
 
     #: Analysis-by-synthesis (``refine``): weight of the pull towards the encoder's estimate,
@@ -396,7 +398,7 @@ class Retargeter:
     def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
                  refine_steps: int = 0, code_map: np.ndarray | None = None,
-                 code_map_gate: np.ndarray | None = None):
+                 code_map_gate: np.ndarray | None = None, upright: bool = True):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
@@ -410,6 +412,7 @@ class Retargeter:
         self.source_cache_size = int(source_cache_size)
         self._sources: OrderedDict[tuple, SourceTopology] = OrderedDict()
         self.refine_steps = refine_steps   # gradient steps on the free dims of z_GE after the fit
+        self.upright = upright             # turn tilted heads upright first (``canonicaliser``)
 
     @property
     def code_map(self) -> np.ndarray | None:
@@ -469,6 +472,19 @@ class Retargeter:
         return cls(model_from_checkpoint(state, path), device, **kwargs)
 
     # --------------------------------------------------------------------------- preparation
+    def canonicaliser(self, vertices: np.ndarray, faces: np.ndarray, name: str,
+                      proxy: tuple | None = None) -> Canonicaliser:
+        """The canonical frame of a target or source neutral (V,3) with faces (F,3), of the model's
+        kind. With ``upright`` (the default) and the face frame, a head pitched 5° or more, or
+        turned sideways 2.5° or more, from facing +z is turned upright first
+        (``retarget.canonical.upright_rotation``, on ``proxy`` = (vertices, faces) of a decimated
+        copy when given): the network was trained on upright heads, and its results are turned
+        back into the mesh's own frame."""
+        rotation = (upright_rotation(*(proxy or (vertices, faces)))
+                    if self.upright and self.cfg.canonical == "face" else None)
+        return Canonicaliser.fit(vertices, name=name, kind=self.cfg.canonical, faces=faces,
+                                 rotation=rotation)
+
     def _prepare(self, mesh: Mesh, canon=None, ops=None) -> PreparedMesh:
         return prepare_mesh(mesh.vertices, mesh.faces, self.cfg.k_eig, self.cfg.image_size,
                             IMAGE_CHANNELS[self.cfg.image_channels], canon=canon, ops=ops,
@@ -482,13 +498,13 @@ class Retargeter:
             return mesh
         mesh = as_mesh(mesh, role="target")
         check_head_like(mesh, "target")
-        canon = Canonicaliser.fit(mesh.vertices, name=mesh.name or "target",
-                                  kind=self.cfg.canonical, faces=mesh.faces)
         if mesh.n_vertices > self.proxy_vertices:
             (pv, pf), cluster = cluster_decimate(mesh.vertices, mesh.faces, self.proxy_vertices)
+            canon = self.canonicaliser(mesh.vertices, mesh.faces, mesh.name or "target", (pv, pf))
             proxy = self._prepare(Mesh(pv, pf, mesh.name), canon=canon)
             feat = vertex_features(canon.to_canonical(mesh.vertices).astype(np.float32), mesh.faces)
         else:
+            canon = self.canonicaliser(mesh.vertices, mesh.faces, mesh.name or "target")
             proxy, cluster = self._prepare(mesh, canon=canon), None
             feat = proxy.feat  # the proxy is the mesh itself: its features are computed already
         feat_p, img_p, ops_p = proxy.torch_inputs(self.device)
@@ -513,7 +529,8 @@ class Retargeter:
 
         The key is the vertex count and a hash of the face array, plus a hash of the vertices when
         ``ref`` is a source neutral (``neutral``), so each neutral keeps its own entry while frames
-        without one share the entry of the first frame of their topology. The cache is an LRU of
+        without one share the entry of the first frame of their topology, and with it the turn
+        that frame needed to face +z (``canonicaliser``). The cache is an LRU of
         ``source_cache_size`` entries (0 = no cache: computed on every call);
         :meth:`clear_source_cache` empties it.
         """
@@ -525,7 +542,7 @@ class Retargeter:
         if ref.n_vertices > self.proxy_vertices:
             (_, faces), cluster = cluster_decimate(ref.vertices, ref.faces, self.proxy_vertices)
         pv = ref.vertices if cluster is None else cluster_means(ref.vertices, cluster)
-        canon = Canonicaliser.fit(pv, name=ref.name or "source", kind=self.cfg.canonical, faces=faces)
+        canon = self.canonicaliser(pv, faces, ref.name or "source")
         ops = load_or_compute_operators(canon.to_canonical(pv).astype(np.float32), faces,
                                         self.cfg.k_eig, cache_dir=self.cache_dir)
         src = SourceTopology(faces, cluster, canon, ops, ops.to_torch(self.device))
@@ -548,7 +565,8 @@ class Retargeter:
         The frames of a call share one canonical frame, that of ``source_neutral`` if given, else of
         the first frame. They share one set of operators (and, above ``proxy_vertices``, one
         vertex-clustered proxy: each frame's proxy vertex = the mean of its cluster), those of the
-        source's topology: computed on ``source_neutral`` if given, else on the first frame of that
+        source's topology, and the turn that faces it +z (``canonicaliser``): computed on
+        ``source_neutral`` if given, else on the first frame of that
         topology this Retargeter saw, and kept for later calls (:meth:`source_topology`; bounded by
         ``source_cache_size``, emptied by :meth:`clear_source_cache`). So a stream of single-frame
         calls costs what one batched call does per frame. To switch to another performer of the same
@@ -560,9 +578,9 @@ class Retargeter:
         ref = neutral or frames[0]
         check_head_like(ref, "source")
         src = self.source_topology(ref, neutral=neutral is not None)
-        canon = src.canon if neutral is not None else Canonicaliser.fit(
+        canon = src.canon if neutral is not None else Canonicaliser.fit(   # turned as the topology
             src.proxy(ref).vertices, name=ref.name or "source", kind=self.cfg.canonical,
-            faces=src.faces)
+            faces=src.faces, rotation=src.canon.rotation)
         use_neutral = self.cfg.neutral_channels and neutral is not None
         if use_neutral and src.neutral is None:
             # the neutral in its own canonical frame: the reference of the encoder's neutral channels

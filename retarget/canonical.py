@@ -22,6 +22,8 @@ times ten. This is the robustness to scale and translation that NFS lacks (paper
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -50,6 +52,32 @@ SHOULDER_MIN_HEAD = 0.2   # ... under a head at least this share of the slice's 
 #: few per cent of their bounding-box frame.
 FACE_WIDTH_CANONICAL = 11.5
 FACE_POINT_CANONICAL = np.array([0.0, 1.1, 10.3])
+#: Turning a head upright (:func:`upright_rotation`): a small morphable model of the front of the
+#: face, ``UPRIGHT_TEMPLATE_HEADS`` regular MakeHuman training heads each in its face frame (their
+#: skin vertices inside ``UPRIGHT_FACE_BOX``, canonical [min, max]: brow to chin), their mean and
+#: ``UPRIGHT_SHAPES`` principal shapes, is fitted to the mesh by ICP: a rigid motion and the
+#: shapes' coefficients (ridge ``UPRIGHT_SHAPE_PRIOR`` over each shape's variance), so that a face
+#: with a long chin or a sloping forehead is read as that shape, not as a turned head. The fit
+#: starts from each of ``UPRIGHT_STARTS`` (pitch, yaw in degrees) with ``UPRIGHT_COARSE_STEPS``
+#: steps, the best goes on for at most ``UPRIGHT_STEPS`` more, matching the ``UPRIGHT_TRIM`` share
+#: of model points nearest the mesh (at most ``UPRIGHT_MAX_POINTS`` of its vertices). A head is
+#: turned when the fit is good (RMS point-to-plane distance ≤ ``UPRIGHT_MAX_RMS`` canonical units:
+#: regular MakeHuman heads fit within 0.09, the procedural heads 0.114-0.165) and it is pitched at
+#: least ``UPRIGHT_MIN_PITCH`` or turned sideways (yaw and roll) at least ``UPRIGHT_MIN_SIDE``
+#: degrees (docs/RESULTS.md, "Heads that do not face +z").
+UPRIGHT_TEMPLATE_HEADS = 64
+UPRIGHT_SHAPES = 8
+UPRIGHT_SHAPE_PRIOR = 1.0
+UPRIGHT_FACE_BOX = np.array([[-5.5, -11.0, 3.0], [5.5, 9.0, 20.0]])
+UPRIGHT_STARTS = ((0.0, 0.0), (-20.0, 0.0), (20.0, 0.0), (0.0, -25.0), (0.0, 25.0))
+UPRIGHT_COARSE_STEPS = 10
+UPRIGHT_STEPS = 30
+UPRIGHT_TRIM = 0.8
+UPRIGHT_MIN_PITCH = 5.0
+UPRIGHT_MIN_SIDE = 2.5
+UPRIGHT_MAX_RMS = 0.10
+UPRIGHT_MAX_POINTS = 40000
+UPRIGHT_CONVERGED = 1e-5     # an ICP step below this (radians, canonical units) ends the fit
 #: The frontal render of a face-frame model frames this canonical box ([min, max], (2,3)) instead
 #: of each mesh's bounding box, so the image follows the face frame whatever the crop.
 FACE_RENDER_BOX = np.array([[-10.0, -15.0, -13.0], [10.0, 16.0, 12.0]])
@@ -57,37 +85,46 @@ FACE_RENDER_BOX = np.array([[-10.0, -15.0, -13.0], [10.0, 16.0, 12.0]])
 
 @dataclass(frozen=True)
 class Canonicaliser:
-    """Similarity (translation + uniform scale) from a mesh's frame to the canonical frame.
+    """Similarity (rotation + translation + uniform scale) from a mesh's frame to the canonical frame.
 
-    centre: (3,) float64, input units: the point that goes to the canonical origin. scale: canonical
-    units per input unit. kind: "bbox" or "face" (how it was fitted).
-    canonical = (points − centre) · scale.
+    centre: (3,) float64, input units: the point (of the turned mesh) that goes to the canonical
+    origin. scale: canonical units per input unit. kind: "bbox" or "face" (how it was fitted).
+    rotation: (3,3) float64 turning the mesh upright before the fit (:func:`upright_rotation`), or
+    None (the mesh is taken as it is: the network's frame is +y up, +z forward).
+    canonical = (points · rotationᵀ − centre) · scale.
     """
 
     centre: np.ndarray
     scale: float
     kind: str = "bbox"
+    rotation: np.ndarray | None = None
 
     @classmethod
-    def fit(cls, vertices, name: str = "mesh", kind: str = "bbox", faces=None) -> "Canonicaliser":
-        """Fit to vertices (V,3) (faces (F,3) int: needed by the "face" kind).
+    def fit(cls, vertices, name: str = "mesh", kind: str = "bbox", faces=None,
+            rotation: np.ndarray | None = None) -> "Canonicaliser":
+        """Fit to vertices (V,3) (faces (F,3) int: needed by the "face" kind), turned by
+        ``rotation`` (3,3) first when given.
 
         "bbox": bounding-box centre, and scale making the x extent 16 units. "face": see
         :func:`fit_face_frame`. RetargetError (naming ``name``) for a mesh with no width."""
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+        if rotation is not None:
+            rotation = np.asarray(rotation, np.float64)
+            v = v @ rotation.T
         lo, hi = v.min(axis=0), v.max(axis=0)
         width = float(hi[0] - lo[0])
         if not np.isfinite(width) or width <= 1e-12 * max(1.0, float(np.abs(v).max())):
             raise RetargetError(f"{name}: has no width along x (extent {width:g}); "
                                 "is it a face mesh in the +y up, +z forward frame?")
         if kind == "bbox":
-            return cls(centre=0.5 * (lo + hi), scale=CANONICAL_WIDTH / width)
+            return cls(centre=0.5 * (lo + hi), scale=CANONICAL_WIDTH / width, rotation=rotation)
         if kind == "face":
             if faces is None:
                 raise ValueError("Canonicaliser.fit(kind='face') needs the faces")
             point, face_width = fit_face_frame(v, faces)
             scale = FACE_WIDTH_CANONICAL / face_width
-            return cls(centre=point - FACE_POINT_CANONICAL / scale, scale=scale, kind="face")
+            return cls(centre=point - FACE_POINT_CANONICAL / scale, scale=scale, kind="face",
+                       rotation=rotation)
         raise ValueError(f"unknown canonical frame {kind!r}; choose from {FRAMES}")
 
     @property
@@ -97,21 +134,27 @@ class Canonicaliser:
         "face"."""
         return True if self.kind == "bbox" else FACE_RENDER_BOX
 
+    def _turn(self, d: np.ndarray) -> np.ndarray:
+        return d if self.rotation is None else d @ self.rotation.T
+
+    def _unturn(self, d: np.ndarray) -> np.ndarray:
+        return d if self.rotation is None else d @ self.rotation
+
     def to_canonical(self, points) -> np.ndarray:
         """(..., 3) points in input units -> (..., 3) float64 canonical."""
-        return (np.asarray(points, dtype=np.float64) - self.centre) * self.scale
+        return (self._turn(np.asarray(points, dtype=np.float64)) - self.centre) * self.scale
 
     def from_canonical(self, points) -> np.ndarray:
         """(..., 3) canonical points -> (..., 3) float64 in the input's frame and units."""
-        return np.asarray(points, dtype=np.float64) / self.scale + self.centre
+        return self._unturn(np.asarray(points, dtype=np.float64) / self.scale + self.centre)
 
     def displacement_from_canonical(self, d) -> np.ndarray:
-        """(..., 3) canonical displacements -> (..., 3) float64 input units (scale only)."""
-        return np.asarray(d, dtype=np.float64) / self.scale
+        """(..., 3) canonical displacements -> (..., 3) float64 input units (rotation and scale)."""
+        return self._unturn(np.asarray(d, dtype=np.float64) / self.scale)
 
     def displacement_to_canonical(self, d) -> np.ndarray:
-        """(..., 3) displacements in input units -> (..., 3) float64 canonical (scale only)."""
-        return np.asarray(d, dtype=np.float64) * self.scale
+        """(..., 3) displacements in input units -> (..., 3) float64 canonical (rotation and scale)."""
+        return self._turn(np.asarray(d, dtype=np.float64)) * self.scale
 
 
 # ------------------------------------------------------------------------------------- face frame
@@ -291,3 +334,175 @@ def fit_face_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     x_mid = lo[0] + 0.5 * (ii.max() + ii.min() + 1) * cell
     return (np.array([x_mid, lo[1] + (seed[1] + 0.5) * cell, height[seed]]),
             float((ii.max() - ii.min() + 1) * cell))
+
+
+# ------------------------------------------------------------------------------------- upright
+def turn_matrix(pitch: float = 0.0, yaw: float = 0.0) -> np.ndarray:
+    """(3,3) rotation: ``pitch`` degrees about +x (+: the face looks down), then ``yaw`` degrees about
+    +y (+: the face turns to its left, +x)."""
+    a, b = np.radians(pitch), np.radians(yaw)
+    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+    return ry @ rx
+
+
+def rotation_angle(rotation: np.ndarray) -> float:
+    """The angle (degrees) of a (3,3) rotation."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+#: The face model of :func:`upright_face_model`, shipped with the MakeHuman data it is made from
+#: (made by :func:`build_upright_face_model`; ``write_upright_face_model`` writes it again).
+UPRIGHT_MODEL_PATH = (Path(__file__).resolve().parents[1] / "data_synth" / "makehuman" / "data"
+                      / "upright_face_model.npz")
+
+
+def build_upright_face_model() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The morphable front of the face that :func:`upright_fit` fits: ``UPRIGHT_TEMPLATE_HEADS``
+    regular MakeHuman training heads (``sample_head_identity(seed, "train")``, seeds from 0, the
+    stylised ones skipped), each in its own face frame, their skin vertices inside
+    ``UPRIGHT_FACE_BOX`` of the mean. Returns (mean (N,3), shapes (K,N,3) of unit norm, variances
+    (K,)), float64: the ``UPRIGHT_SHAPES`` principal shapes and the variance of the heads along
+    each; canonical units. From the packaged CC0 MakeHuman data (about 1.5 s)."""
+    from data_synth.makehuman import assets
+    from data_synth.makehuman.identity import head_neutral, sample_head_identity
+
+    faces = assets.heads()["full_faces"]
+    heads, seed = [], 0
+    while len(heads) < UPRIGHT_TEMPLATE_HEADS:
+        identity = sample_head_identity(seed, "train")
+        seed += 1
+        if not identity.stylised:
+            v = head_neutral(identity, "head").astype(np.float64)
+            heads.append(Canonicaliser.fit(v, kind="face", faces=faces).to_canonical(v)[:assets.N_SKIN])
+    heads = np.asarray(heads)
+    mean = heads.mean(axis=0)
+    keep = ((mean >= UPRIGHT_FACE_BOX[0]) & (mean <= UPRIGHT_FACE_BOX[1])).all(axis=1)
+    _, sv, vt = np.linalg.svd((heads[:, keep] - mean[keep]).reshape(len(heads), -1),
+                              full_matrices=False)
+    return (mean[keep], vt[:UPRIGHT_SHAPES].reshape(UPRIGHT_SHAPES, -1, 3),
+            sv[:UPRIGHT_SHAPES] ** 2 / (len(heads) - 1))
+
+
+def write_upright_face_model(path=UPRIGHT_MODEL_PATH) -> Path:
+    """Write :func:`build_upright_face_model` to ``path`` (npz of mean, shapes, variances, float32;
+    atomically)."""
+    path = Path(path)
+    mean, shapes, variances = build_upright_face_model()
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(tmp, mean=mean.astype(np.float32), shapes=shapes.astype(np.float32),
+                        variances=variances.astype(np.float32))
+    tmp.replace(path)
+    return path
+
+
+@lru_cache(maxsize=1)
+def upright_face_model() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`build_upright_face_model`'s (mean (N,3), shapes (K,N,3), variances (K,)) as shipped
+    (``UPRIGHT_MODEL_PATH``), float64."""
+    try:
+        with np.load(UPRIGHT_MODEL_PATH, allow_pickle=False) as z:
+            return tuple(z[k].astype(np.float64) for k in ("mean", "shapes", "variances"))
+    except (OSError, KeyError, ValueError) as e:
+        raise RetargetError(f"{UPRIGHT_MODEL_PATH}: the packaged face model is missing or "
+                            f"unreadable ({e}); reinstall the package") from None
+
+
+def _skew_exp(w: np.ndarray) -> np.ndarray:
+    """exp of the cross-product matrix of w (3,): the rotation by |w| radians about w (Rodrigues)."""
+    theta = float(np.linalg.norm(w))
+    if theta < 1e-15:
+        return np.eye(3)
+    k = w / theta
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(theta) * kx + (1.0 - np.cos(theta)) * kx @ kx
+
+
+def _icp(tree, points: np.ndarray, normals: np.ndarray, steps: int, rotation: np.ndarray,
+         shift: np.ndarray, coeffs: np.ndarray) -> tuple:
+    """Trimmed point-to-plane ICP of the face model (:func:`upright_face_model`) onto the points
+    (M,3) with unit normals (M,3) (``tree``: their cKDTree): the model face mean + Σ coeffs_k
+    shape_k moved by p -> rotation · p + shift, with a ridge pull of each coefficient towards 0
+    (``UPRIGHT_SHAPE_PRIOR`` / its variance). At most ``steps`` linearised steps from the given
+    fit (fewer once a step is below ``UPRIGHT_CONVERGED``). Returns (rotation, shift, coeffs, the
+    RMS point-to-plane distance of the ``UPRIGHT_TRIM`` share of nearest model points)."""
+    mean, shapes, variances = upright_face_model()
+    ridge = np.concatenate([np.zeros(6), UPRIGHT_SHAPE_PRIOR / variances])
+    for _ in range(steps):
+        p = (mean + np.tensordot(coeffs, shapes, axes=1)) @ rotation.T + shift
+        dist, j = tree.query(p)
+        keep = dist <= np.quantile(dist, UPRIGHT_TRIM)
+        p, q, n = p[keep], points[j[keep]], normals[j[keep]]
+        moved = shapes[:, keep] @ rotation.T                         # (K, n, 3): each shape, turned
+        a = np.concatenate([np.cross(p, n), n, np.einsum("kpd,pd->pk", moved, n)], axis=1)
+        x = np.linalg.solve(a.T @ a + np.diag(ridge),                 # n·(ω×p + t + Σδc_k R s_k)
+                            a.T @ ((q - p) * n).sum(axis=1) - ridge * np.r_[np.zeros(6), coeffs])
+        step = _skew_exp(x[:3])
+        rotation, shift, coeffs = step @ rotation, step @ shift + x[3:6], coeffs + x[6:]
+        if np.abs(x).max() < UPRIGHT_CONVERGED:
+            break
+    p = (mean + np.tensordot(coeffs, shapes, axes=1)) @ rotation.T + shift
+    j = tree.query(p)[1]
+    dist = np.sort(np.abs(((points[j] - p) * normals[j]).sum(axis=1)))[:int(UPRIGHT_TRIM * len(p))]
+    return rotation, shift, coeffs, float(np.sqrt(np.mean(dist ** 2)))
+
+
+def upright_fit(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
+    """How far a head is turned from upright: the rotation U (3,3) such that vertices · Uᵀ faces +z
+    as the MakeHuman training heads do, and the RMS point-to-plane distance (canonical units) of
+    the face model (:func:`upright_face_model`) fitted to it. From each start of
+    ``UPRIGHT_STARTS`` the mesh is turned, put in its face frame and the model fitted by ICP
+    (:func:`_icp`); the best fit is refined. vertices (V,3) float64 (+y up, +z forward, roughly),
+    faces (F,3) int."""
+    from scipy.spatial import cKDTree
+
+    from nets.geometry import vertex_normals
+
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    v = np.asarray(vertices, np.float64)
+    used = np.unique(faces)
+    if len(used) > UPRIGHT_MAX_POINTS:
+        used = np.sort(np.random.default_rng(0).choice(used, UPRIGHT_MAX_POINTS, replace=False))
+    fits = []
+    for pitch, yaw in UPRIGHT_STARTS:
+        start = turn_matrix(pitch, yaw)
+        cv = Canonicaliser.fit(v, kind="face", faces=faces, rotation=start).to_canonical(v)
+        points, normals = cv[used], vertex_normals(cv, faces)[used]
+        tree = cKDTree(points)
+        fit = _icp(tree, points, normals, UPRIGHT_COARSE_STEPS, np.eye(3), np.zeros(3),
+                   np.zeros(UPRIGHT_SHAPES))
+        fits.append((fit[-1], start, tree, points, normals, fit))
+    _, start, tree, points, normals, (r, t, c, _) = min(fits, key=lambda f: f[0])
+    r, _, _, rms = _icp(tree, points, normals, UPRIGHT_STEPS, r, t, c)
+    return r.T @ start, rms                      # the model turned by r fits: undo r
+
+
+def side_turn(rotation: np.ndarray) -> np.ndarray:
+    """The yaw-and-roll part S (3,3) of a rotation U that turns a head upright: the least rotation
+    taking the head's left-right axis Uᵀ e_x to e_x. U = P · S with P a pure pitch (about x)."""
+    a = rotation.T @ np.array([1.0, 0.0, 0.0])
+    axis = np.cross(a, [1.0, 0.0, 0.0])
+    sin = float(np.linalg.norm(axis))
+    if sin < 1e-12:
+        return np.eye(3)
+    return _skew_exp(axis / sin * np.arctan2(sin, float(a[0])))
+
+
+def upright_rotation(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
+    """The rotation (3,3) that turns a head upright before its face frame is fitted, or None when
+    it needs none. From :func:`upright_fit` U = P · S (:func:`side_turn`): the whole of U when its
+    pitch P is at least ``UPRIGHT_MIN_PITCH``; else S alone when the head is turned sideways (yaw
+    and roll) at least ``UPRIGHT_MIN_SIDE``; never when the face model fits it too badly to tell
+    (``UPRIGHT_MAX_RMS``: procedural and many stylised heads). The thresholds lie at or above what
+    nearly all upright regular MakeHuman heads read from their own shape (pitch: 4.9° at most on
+    50 test heads, 7.0° on 51 validation heads; yaw and roll 2.0°), so heads like those the network
+    was trained on are taken as they are. Without it a head turned 10° up, down or aside loses
+    most of its accuracy (docs/RESULTS.md, "Heads that do not face +z").
+    vertices (V,3), faces (F,3) int."""
+    rotation, rms = upright_fit(vertices, faces)
+    if rms > UPRIGHT_MAX_RMS:
+        return None
+    side = side_turn(rotation)
+    if rotation_angle(rotation @ side.T) >= UPRIGHT_MIN_PITCH:
+        return rotation
+    return side if rotation_angle(side) >= UPRIGHT_MIN_SIDE else None

@@ -108,7 +108,7 @@ def displacement_transfer(transfer: sp.csr_matrix, src_neutral: np.ndarray,
 
 def closest_point_transfer(src_neutral: np.ndarray, src_faces: np.ndarray, src_frames: np.ndarray,
                            tgt_neutral: np.ndarray, tgt_faces: np.ndarray,
-                           frame: str = "face") -> np.ndarray:
+                           frame: str = "face", upright: bool = False) -> np.ndarray:
     """The closest-point displacement-transfer baseline: what a technical artist tries first in a
     DCC tool once the two heads are aligned.
 
@@ -117,16 +117,19 @@ def closest_point_transfer(src_neutral: np.ndarray, src_faces: np.ndarray, src_f
     vertex takes the displacement (frame − neutral) of the nearest source vertex in the canonical
     frame, converted from the source's units to canonical units and then to the target's units.
     It needs the source neutral (displacements are measured from it), no correspondence and no
-    (u, v); on one mesh (self-retargeting) it is exact.
+    (u, v); on one mesh (self-retargeting) it is exact. ``upright``: a tilted head is turned
+    upright before its frame is fitted, as ``Retargeter`` does (``retarget.canonical.upright_rotation``).
 
     src_neutral (Vs,3), src_faces (Fs,3), src_frames (T,Vs,3) or (Vs,3) in the source's units;
     tgt_neutral (Vt,3), tgt_faces (Ft,3) in the target's units (any units and offsets).
     Returns (T,Vt,3) or (Vt,3) float64 target frames in the target's units.
     """
-    from .canonical import Canonicaliser
+    from .canonical import Canonicaliser, upright_rotation
 
-    src_canon = Canonicaliser.fit(src_neutral, "source", kind=frame, faces=src_faces)
-    tgt_canon = Canonicaliser.fit(tgt_neutral, "target", kind=frame, faces=tgt_faces)
+    src_canon, tgt_canon = (
+        Canonicaliser.fit(v, name, kind=frame, faces=f,
+                          rotation=upright_rotation(np.asarray(v, np.float64), f) if upright else None)
+        for v, f, name in ((src_neutral, src_faces, "source"), (tgt_neutral, tgt_faces, "target")))
     _, nearest = cKDTree(src_canon.to_canonical(src_neutral)).query(tgt_canon.to_canonical(tgt_neutral))
     frames = np.asarray(src_frames, np.float64)
     disp = (frames - np.asarray(src_neutral, np.float64))[..., nearest, :]

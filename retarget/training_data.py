@@ -309,6 +309,26 @@ def make_source(entry: Entry, weights: np.ndarray, kind: str, rng: np.random.Gen
     return Source(entry, prepared.feat, prepared.image, weights, kind, channels)
 
 
+
+def upright_rig(rig):
+    """A user's rig (``retarget.user_rig.UserRig``) turned upright when its neutral is tilted
+    (``retarget.canonical.upright_rotation``; the rig itself otherwise), so that fine-tuning sees
+    the head as ``Retargeter`` will: the neutral, its shapes and its identity shapes turned alike."""
+    import dataclasses
+
+    from .canonical import rotation_angle, upright_rotation
+
+    rotation = upright_rotation(rig.neutral.astype(np.float64), rig.faces)
+    if rotation is None:
+        return rig
+    print(f"{rig.name}: the head is turned {rotation_angle(rotation):.1f} degrees from facing +z; "
+          "fine-tuning on it turned upright", flush=True)
+    turn = rotation.T.astype(np.float32)
+    return dataclasses.replace(
+        rig, neutral=rig.neutral @ turn, deltas=rig.deltas @ turn,
+        identity_deltas=None if rig.identity_deltas is None else rig.identity_deltas @ turn)
+
+
 class RigPool:
     """Self-retargeting groups on the user's own rig (``data.rig``), mixed with procedural groups.
 
@@ -328,6 +348,8 @@ class RigPool:
             raise RetargetError(f"data.rig_mix must be in [0, 1], got {self.mix}")
         rig = load_user_rig(data_cfg["rig"], data_cfg["keep_vertices"],
                             strict=bool(data_cfg.get("rig_strict", False)))
+        if model_cfg.canonical == "face":   # a tilted head is turned upright, as Retargeter does
+            rig = upright_rig(rig)
         if rig.segments is not None and rig.segments.max() >= model_cfg.n_segments:
             raise RetargetError(f"{rig.name}: segment labels reach {int(rig.segments.max())}, but the "
                                 f"model has {model_cfg.n_segments} segments")

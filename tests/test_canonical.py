@@ -214,3 +214,55 @@ def test_a_face_frame_model_prepares_and_transfers_in_any_units():
     cm = r.transfer(frame, target, source_neutral=Mesh(v, f))
     mm = r.transfer(Mesh(frame.vertices * 10, f), Mesh(v * 10 + 3.0, f), source_neutral=Mesh(v * 10, f))
     assert np.allclose(mm, cm * 10 + 3.0, atol=1e-3)
+
+
+# ------------------------------------------------------------------------------------- upright
+from retarget.canonical import (rotation_angle, side_turn, turn_matrix, upright_fit,  # noqa: E402
+                                upright_rotation)
+
+
+def arkit_neutral():
+    a = np.load(RIGS / "makehuman_arkit.npz", allow_pickle=False)
+    return a["neutral"].astype(np.float64), a["faces"].astype(np.int64)
+
+
+def test_a_rotation_is_undone_exactly_and_round_trips():
+    v, f = arkit_neutral()
+    turn = turn_matrix(20.0, -10.0)
+    a = Canonicaliser.fit(v, kind="face", faces=f)
+    b = Canonicaliser.fit(v @ turn.T, kind="face", faces=f, rotation=turn.T)
+    assert np.allclose(b.to_canonical(v @ turn.T), a.to_canonical(v), atol=1e-9)
+    assert np.allclose(b.from_canonical(b.to_canonical(v)), v)
+    d = np.random.default_rng(0).standard_normal((4, len(v), 3))
+    assert np.allclose(b.displacement_from_canonical(a.displacement_to_canonical(d)),
+                       d @ turn.T)   # the upright head's motion comes back turned with the mesh
+    assert np.allclose(b.displacement_to_canonical(d @ turn.T), a.displacement_to_canonical(d))
+
+
+@pytest.mark.parametrize("pitch, yaw", [(20.0, 0.0), (-15.0, 0.0), (0.0, 15.0), (10.0, -10.0)])
+def test_upright_fit_finds_how_a_head_is_turned(pitch, yaw):
+    v, f = arkit_neutral()
+    turn = turn_matrix(pitch, yaw)
+    rotation, rms = upright_fit(v @ turn.T, f)
+    assert rotation_angle(rotation @ turn) < 1.0          # undoes the turn within 1°
+    assert rms < 0.1
+
+
+def test_upright_rotation_turns_only_tilted_human_heads():
+    v, f = arkit_neutral()
+    assert upright_rotation(v, f) is None                                  # upright
+    assert upright_rotation(v @ turn_matrix(3.0, 0.0).T, f) is None        # pitch below 5°
+    pitched = upright_rotation(v @ turn_matrix(20.0, 0.0).T, f)
+    assert pitched is not None and abs(rotation_angle(pitched) - 20.0) < 1.0
+    sideways = upright_rotation(v @ turn_matrix(3.0, 12.0).T, f)          # the yaw alone is undone
+    assert sideways is not None and rotation_angle(sideways @ side_turn(sideways).T) < 1e-6
+    assert abs(rotation_angle(sideways) - 12.0) < 1.0
+    pv, pf = procedural(0, 2500, "adaptive", "full")                       # not a human face:
+    assert upright_rotation(pv @ turn_matrix(20.0, 0.0).T, pf) is None     # left as it is
+
+
+def test_the_shipped_face_model_is_what_the_builder_makes():
+    from retarget.canonical import build_upright_face_model, upright_face_model
+
+    for shipped, built in zip(upright_face_model(), build_upright_face_model()):
+        np.testing.assert_allclose(shipped, built, rtol=1e-5, atol=1e-5)

@@ -278,3 +278,24 @@ def test_a_streamed_sequence_is_written_one_frame_at_a_time(tmp_path, monkeypatc
         assert (tmp_path / "streamed" / name).read_text() == (tmp_path / "array" / name).read_text()
     with pytest.raises(ValueError, match="n_frames"):
         _common.write_frames(str(tmp_path / "x"), iter(frames), faces, [], args)
+
+
+def test_a_tilted_head_is_reported_and_no_upright_keeps_it(tmp_path, capsys):
+    from retarget.canonical import turn_matrix
+    from retarget.mesh import Mesh
+
+    a = np.load(Path(__file__).resolve().parents[1] / "data_synth" / "makehuman" / "data"
+                / "makehuman_arkit.npz", allow_pickle=False)
+    turn = turn_matrix(-20.0, 0.0)
+    save_mesh(tmp_path / "tilted.obj", Mesh(a["neutral"] @ turn.T, a["faces"]))
+    (tmp_path / "w.json").write_text('{"jawOpen": 0.8}')
+    ckpt = tiny_checkpoint(tmp_path / "face.pt", canonical="face")
+    common = [str(tmp_path / "tilted.obj"), "--weights", str(tmp_path / "w.json"), "--checkpoint",
+              str(ckpt), "--device", "cpu"]
+    assert main(["animate", *common, "-o", str(tmp_path / "a.obj")]) == 0
+    import re
+    turned = re.search(r"tilted.obj: the head is turned ([0-9.]+) degrees", capsys.readouterr().err)
+    assert turned and abs(float(turned.group(1)) - 20.0) < 2.0
+    assert main(["animate", *common, "-o", str(tmp_path / "b.obj"), "--no-upright"]) == 0
+    assert "turned" not in capsys.readouterr().err
+    assert not np.allclose(load_mesh(tmp_path / "a.obj").vertices, load_mesh(tmp_path / "b.obj").vertices)

@@ -284,3 +284,27 @@ def test_finetuning_lowers_the_makehuman_self_retargeting_error(tmp_path, capsys
                  "--init", str(tmp_path / "init.pt"), "--out", str(tmp_path / "cli"),
                  "--steps", "1", "--no-progress"]) == 0
     assert "saved" in capsys.readouterr().out and (tmp_path / "cli" / "model.pt").is_file()
+
+
+def test_a_tilted_rig_is_fine_tuned_upright(tmp_path):
+    from retarget.canonical import rotation_angle, turn_matrix
+    from retarget.training_data import upright_rig
+
+    a = np.load(ROOT / "data_synth" / "makehuman" / "data" / "makehuman_arkit.npz", allow_pickle=False)
+    turn = turn_matrix(-20.0, 0.0)
+    np.savez(tmp_path / "tilted.npz", neutral=a["neutral"] @ turn.T, faces=a["faces"],
+             names=a["names"], deltas=a["deltas"] @ turn.T)
+    np.savez(tmp_path / "upright.npz", neutral=a["neutral"], faces=a["faces"], names=a["names"],
+             deltas=a["deltas"])
+    rig = load_user_rig(tmp_path / "upright.npz")
+    assert upright_rig(rig) is rig                               # upright: left as it is
+    tilted = load_user_rig(tmp_path / "tilted.npz")
+    turned = upright_rig(tilted)
+    # the rotation taking the tilted neutral to the turned one (Kabsch) undoes the tilt within 2°
+    p = tilted.neutral - tilted.neutral.mean(0)
+    q = turned.neutral - turned.neutral.mean(0)
+    u, _, vt = np.linalg.svd(p.T.astype(np.float64) @ q)
+    rotation = (u @ vt).T
+    assert np.allclose(q, p @ rotation.T, atol=1e-3)
+    assert rotation_angle(rotation @ turn) < 2.0
+    assert np.allclose(turned.deltas, tilted.deltas @ rotation.T.astype(np.float32), atol=1e-4)

@@ -27,6 +27,10 @@ def add_model_args(p) -> None:
     p.add_argument("--no-code-map", action="store_true",
                    help="leave the checkpoint's code map out: FACS weights drawn as the paper's "
                         "[w, 0], and invert's fit tuned without a map (docs/RESULTS.md, \"The code map\")")
+    p.add_argument("--no-upright", action="store_true",
+                   help="take every mesh as it faces: do not turn a head pitched 5 degrees or more, "
+                        "or turned sideways 2.5 or more, upright first (docs/RESULTS.md, \"Heads that "
+                        "do not face +z\")")
 
 
 def add_neutral_args(p) -> None:
@@ -122,6 +126,26 @@ def print_neutral_hint(args) -> None:
         print(hint, file=sys.stderr)
 
 
+def print_turns(r, target=None, target_name: str = "", frames=None, neutral=None,
+                source_name: str = "") -> None:
+    """A note on stderr for each head that ``r`` turned upright before the network saw it
+    (``Retargeter.canonicaliser``): ``target`` a prepared Target, and the source (``frames`` with
+    their ``neutral`` or None, after they were encoded: their topology is cached)."""
+    from ..canonical import rotation_angle
+
+    canons = []
+    if target is not None:
+        canons.append((target_name, target.proxy.canon))
+    if frames is not None:
+        ref = neutral if neutral is not None else frames[0]
+        canons.append((source_name, r.source_topology(ref, neutral=neutral is not None).canon))
+    for name, canon in canons:
+        if canon.rotation is not None:
+            print(f"{name}: the head is turned {rotation_angle(canon.rotation):.1f} degrees from facing "
+                  "+z; the network saw it upright, the results are in its own frame (--no-upright: "
+                  "take it as it faces)", file=sys.stderr)
+
+
 def estimated_neutral(args, r, frames, neutral):
     """The source neutral to use: with ``--estimate-neutral`` the one ``Retargeter.estimate_neutral``
     makes from ``frames`` (a note on stderr when the take is a single frame: there is nothing to
@@ -163,7 +187,8 @@ def retargeter(args):
     from ..api import Retargeter
     extra = {"code_map": None} if getattr(args, "no_code_map", False) else {}
     return Retargeter.load(args.checkpoint, device=args.device,
-                           refine_steps=getattr(args, "refine_steps", 0), **extra)
+                           refine_steps=getattr(args, "refine_steps", 0),
+                           upright=not getattr(args, "no_upright", False), **extra)
 
 
 def rotation(args) -> np.ndarray:

@@ -1,7 +1,8 @@
 """``retarget animate``: drive a target mesh from FACS weights, without building a rig."""
 from __future__ import annotations
 
-from ._common import add_model_args, output_paths, read_weights_file, retargeter, write_frames
+from ._common import (add_model_args, output_paths, print_turns, read_weights_file, retargeter,
+                      write_frames)
 from .export_rig import add_usd_arg, check_usd_output, write_rig
 
 HELP = "drive the neutral TGT from FACS weights (ICT/ARKit CSV, Live Link Face CSV, JSON)"
@@ -41,6 +42,7 @@ def run(args) -> int:
                      len(target.faces), args.force)
     r = retargeter(args)
     tgt = r.prepare(target)
+    print_turns(r, tgt, args.target)
 
     n = len(track.weights)
     if usd:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 
-from ._common import add_model_args, read_weights_file, retargeter, rotation
+from ._common import add_model_args, print_turns, read_weights_file, retargeter, rotation
 
 HELP = ("export a 53-shape blendshape rig (GLB morph targets or UsdSkel blend shapes, ICT names) for "
         "the neutral TGT")
@@ -45,7 +45,10 @@ def run(args) -> int:
         check_output(args.out, inputs)
     track = read_weights_file(args.weights, args.clamp) if args.weights else None
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
-    rig = retargeter(args).bake(target)
+    r = retargeter(args)
+    tgt = r.prepare(target)
+    print_turns(r, tgt, args.target)
+    rig = r.bake(tgt)
     names, anim = write_rig(args.out, rig, target.faces, track, args, args.names)
     print(f"wrote {args.out}: {len(names)} {'blend shapes' if is_usd_path(args.out) else 'morph targets'} "
           f"on {target.n_vertices} vertices" + (f", {len(anim)} animated frames" if anim is not None else ""))
