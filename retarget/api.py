@@ -475,8 +475,8 @@ class Retargeter:
     def canonicaliser(self, vertices: np.ndarray, faces: np.ndarray, name: str,
                       proxy: tuple | None = None) -> Canonicaliser:
         """The canonical frame of a target or source neutral (V,3) with faces (F,3), of the model's
-        kind. With ``upright`` (the default) and the face frame, a head pitched 5° or more, or
-        turned sideways 2.5° or more, from facing +z is turned upright first
+        kind. With ``upright`` (the default) and the face frame, a head pitched 9° or more, or
+        turned sideways 4° or more, from facing +z is turned upright first
         (``retarget.canonical.upright_rotation``, on ``proxy`` = (vertices, faces) of a decimated
         copy when given): the network was trained on upright heads, and its results are turned
         back into the mesh's own frame."""

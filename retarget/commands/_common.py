@@ -28,8 +28,8 @@ def add_model_args(p) -> None:
                    help="leave the checkpoint's code map out: FACS weights drawn as the paper's "
                         "[w, 0], and invert's fit tuned without a map (docs/RESULTS.md, \"The code map\")")
     p.add_argument("--no-upright", action="store_true",
-                   help="take every mesh as it faces: do not turn a head pitched 5 degrees or more, "
-                        "or turned sideways 2.5 or more, upright first (docs/RESULTS.md, \"Heads that "
+                   help="take every mesh as it faces: do not turn a head pitched 9 degrees or more, "
+                        "or turned sideways 4 or more, upright first (docs/RESULTS.md, \"Heads that "
                         "do not face +z\")")
 
 

@@ -1,10 +1,10 @@
 """How straight a head must face the camera: the bundled model on the artist's ARKit rig
-(``makehuman_arkit.npz``) turned about x (pitch: + looks down) or y (yaw: + turns to its left, +x) before
-it is given to the network (docs/RESULTS.md, "Heads that do not face +z").
+(``makehuman_arkit.npz``) turned about x (pitch: + looks down) or y (yaw: + turns to its left,
++x) before it is given to the network (docs/RESULTS.md, "Heads that do not face +z").
 
-Everything is turned alike (the neutral, the frames, the target): the network sees a head that is
-not upright in the +y up, +z forward frame it was trained on (training turns heads by at most
-``augment.rotate_deg`` = 3°). Per angle: self-retargeting (frame -> the same turned neutral) MSE in
+Everything is turned alike (the neutral, the frames, the target): without ``Retargeter``'s
+uprighting (--no-upright) the network sees a head that is not upright in the +y up, +z forward
+frame it was trained on (training turns heads by at most ``augment.rotate_deg`` = 3°). Per angle: self-retargeting (frame -> the same turned neutral) MSE in
 mm² without the neutral, with it, and with refine; invert's weight MAE with the neutral and refine
 (ARKit weights, as the eval's real_rig suite); doing nothing (MSE of the neutral, MAE of predicting
 0); and where the face frame puts the face point (the nose tip) against the true nose tip, the

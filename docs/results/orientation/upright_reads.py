@@ -1,7 +1,8 @@
 """What ``retarget.canonical.upright_fit`` reads on heads that are upright: how far from facing +z
-it finds them (pitch, and yaw and roll together) and how well its template fits, per kind of head,
-and how many ``upright_rotation`` would turn (docs/RESULTS.md, "Heads that do not face +z"). The
-thresholds UPRIGHT_MIN_PITCH, UPRIGHT_MIN_SIDE and UPRIGHT_MAX_RMS lie above what these read.
+it finds them (pitch, and yaw and roll together) and how well its face model fits, per kind of
+head (150 MakeHuman heads of each split, crops, procedural heads), and how many
+``upright_rotation`` would turn (docs/RESULTS.md, "Heads that do not face +z"). The thresholds
+UPRIGHT_MIN_PITCH, UPRIGHT_MIN_SIDE and UPRIGHT_MAX_RMS lie above what these read.
 
     OMP_NUM_THREADS=1 python docs/results/orientation/upright_reads.py > docs/results/orientation/upright_reads.md
 """
@@ -11,7 +12,7 @@ import numpy as np
 
 
 def readings(vertices, faces) -> tuple[float, float, float, bool]:
-    """(pitch °, yaw-and-roll °, template RMS, turned by upright_rotation)."""
+    """(pitch °, yaw-and-roll °, face-model RMS, turned by upright_rotation)."""
     from retarget.canonical import (UPRIGHT_MAX_RMS, UPRIGHT_MIN_PITCH, UPRIGHT_MIN_SIDE,
                                     rotation_angle, side_turn, upright_fit)
 
@@ -33,8 +34,8 @@ def main() -> None:
 
     faces = assets.heads()["full_faces"]
     groups: dict[str, list] = {}
-    for split, n in (("train", 40), ("val", 60), ("test", 60)):
-        for seed in range(n):
+    for split in ("train", "val", "test"):
+        for seed in range(150):
             ident = sample_head_identity(seed, split)
             kind = "stylised" if ident.stylised else "regular"
             groups.setdefault(f"MakeHuman {kind}, {split}", []).append(
@@ -48,14 +49,20 @@ def main() -> None:
     for seed in range(12):
         rig = build_rig(sample_identity(seed, split="test"), tessellate(2500, "adaptive", region="full", seed=0))
         groups.setdefault("procedural test heads", []).append(readings(rig.neutral, rig.faces))
+    from retarget.canonical import UPRIGHT_MAX_RMS
+
     print("| heads | count | pitch: median / max (°) | yaw and roll: median / max (°) | "
-          "template RMS: median / max | turned |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+          "face-model RMS: min / median / max | fit (RMS ≤ gate) | pitch / yaw and roll of those: "
+          "max (°) | turned |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for name, rows in groups.items():
         r = np.array(rows, np.float64)
+        fit = r[r[:, 2] <= UPRIGHT_MAX_RMS]
+        fit_max = f"{fit[:, 0].max():.1f} / {fit[:, 1].max():.1f}" if len(fit) else "—"
         print(f"| {name} | {len(r)} | {np.median(r[:, 0]):.1f} / {r[:, 0].max():.1f} | "
-              f"{np.median(r[:, 1]):.1f} / {r[:, 1].max():.1f} | {np.median(r[:, 2]):.3f} / "
-              f"{r[:, 2].max():.3f} | {int(r[:, 3].sum())} |")
+              f"{np.median(r[:, 1]):.1f} / {r[:, 1].max():.1f} | {r[:, 2].min():.3f} / "
+              f"{np.median(r[:, 2]):.3f} / {r[:, 2].max():.3f} | {len(fit)} | {fit_max} | "
+              f"{int(r[:, 3].sum())} |")
 
 
 if __name__ == "__main__":
