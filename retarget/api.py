@@ -9,8 +9,9 @@
     neutral = load_mesh("actor_neutral.obj")  # the performer's neutral, when you have it:
     w = r.invert(load_mesh("frame.obj"), source_neutral=neutral, refine=True)  # fitted on its rig
 
-Every mesh is canonicalised on the way in (centred, scaled to a 16-unit-wide head) and results are
-mapped back to the target's own frame and units. Meshes above ``proxy_vertices`` (targets and source
+Every mesh is canonicalised on the way in (centred, scaled to a 16-unit-wide head, and turned upright
+when it is tilted: ``Retargeter.canonicaliser``) and results are mapped back to the target's own
+frame and units. Meshes above ``proxy_vertices`` (targets and source
 frames) are encoded on a vertex-clustered proxy; targets are decoded per vertex at full resolution,
 in chunks of ``chunk`` vertices.
 

@@ -13,8 +13,10 @@ Two frames (the kind is recorded per model: ``nets.model.NFSConfig.canonical``):
   ``FACE_POINT_CANONICAL``).
 
 Axes are not changed (the input must already be +y up, +z forward; see
-``retarget.io.axis_rotation``). Network outputs (positions or displacements in canonical units) are
-mapped back to the input's frame and units with :meth:`Canonicaliser.from_canonical` /
+``retarget.io.axis_rotation``), but a head that is tilted from facing +z can be turned upright
+first (:func:`upright_rotation`, the ``rotation`` of :class:`Canonicaliser`; ``Retargeter`` does
+so). Network outputs (positions or displacements in canonical units) are mapped back to the
+input's frame and units with :meth:`Canonicaliser.from_canonical` /
 :meth:`displacement_from_canonical`. Hence a head given in metres, centimetres or millimetres yields
 the same expression, in its own units: the result for the millimetre head is the centimetre result
 times ten. This is the robustness to scale and translation that NFS lacks (paper Fig. 11).
@@ -381,8 +383,10 @@ def build_upright_face_model() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     keep = ((mean >= UPRIGHT_FACE_BOX[0]) & (mean <= UPRIGHT_FACE_BOX[1])).all(axis=1)
     _, sv, vt = np.linalg.svd((heads[:, keep] - mean[keep]).reshape(len(heads), -1),
                               full_matrices=False)
-    return (mean[keep], vt[:UPRIGHT_SHAPES].reshape(UPRIGHT_SHAPES, -1, 3),
-            sv[:UPRIGHT_SHAPES] ** 2 / (len(heads) - 1))
+    shapes = vt[:UPRIGHT_SHAPES]
+    shapes *= np.sign(shapes[np.arange(len(shapes)), np.abs(shapes).argmax(axis=1)])[:, None]
+    return (mean[keep], shapes.reshape(UPRIGHT_SHAPES, -1, 3),      # each shape's largest entry > 0:
+            sv[:UPRIGHT_SHAPES] ** 2 / (len(heads) - 1))              # the same file on any LAPACK
 
 
 def write_upright_face_model(path=UPRIGHT_MODEL_PATH) -> Path:
