@@ -13,14 +13,11 @@ import numpy as np
 
 def readings(vertices, faces) -> tuple[float, float, float, bool]:
     """(pitch °, yaw-and-roll °, face-model RMS, turned by upright_rotation)."""
-    from retarget.canonical import (UPRIGHT_MAX_RMS, UPRIGHT_MIN_PITCH, UPRIGHT_MIN_SIDE,
-                                    rotation_angle, side_turn, upright_fit)
+    from retarget.canonical import pitch_and_side, upright_fit, upright_rotation
 
-    rotation, rms = upright_fit(np.asarray(vertices, np.float64), faces)
-    side = side_turn(rotation)
-    pitch, sideways = rotation_angle(rotation @ side.T), rotation_angle(side)
-    turned = rms <= UPRIGHT_MAX_RMS and (pitch >= UPRIGHT_MIN_PITCH or sideways >= UPRIGHT_MIN_SIDE)
-    return pitch, sideways, rms, turned
+    vertices = np.asarray(vertices, np.float64)
+    rotation, rms = upright_fit(vertices, faces)
+    return (*pitch_and_side(rotation), rms, upright_rotation(vertices, faces) is not None)
 
 
 def main() -> None:
