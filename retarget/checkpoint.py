@@ -12,6 +12,7 @@ import math
 import pickle
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from data_synth.facs import N_FACS
@@ -111,6 +112,15 @@ def checkpoint_code_map(state: dict):
     arrays (``retarget.code_map``); None for what it lacks."""
     return tuple(None if state.get(k) is None else state[k].detach().cpu().float().numpy()
                  for k in ("code_map", "code_map_gate"))
+
+
+def put_code_map(state: dict, code_map: np.ndarray, gate: np.ndarray | None) -> dict:
+    """``state`` with a code map (code_dim, 53) and its gate (code_dim + 1,) or None (no gate) put
+    in as the tensors ``checkpoint_code_map`` reads back; returns ``state``."""
+    state["code_map"] = torch.from_numpy(np.asarray(code_map, np.float32))
+    if gate is not None:
+        state["code_map_gate"] = torch.from_numpy(np.asarray(gate, np.float32))
+    return state
 
 
 def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:

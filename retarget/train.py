@@ -28,8 +28,8 @@ from nets import losses as L
 from nets.model import NFSConfig, NFSModel
 
 from .config import merge, read_yaml
-from .checkpoint import (CHECKPOINT_FORMAT, load_checkpoint, model_from_checkpoint, save_checkpoint,
-                         warm_start)
+from .checkpoint import (CHECKPOINT_FORMAT, load_checkpoint, model_from_checkpoint, put_code_map,
+                         save_checkpoint, warm_start)
 from .errors import RetargetError
 from .metrics import CM_TO_MM, segment_mse_mm2
 from .prepare import IMAGE_CHANNELS, vertex_features
@@ -463,10 +463,7 @@ class Trainer:
             state = {"format": CHECKPOINT_FORMAT, "model_config": self.model_cfg.to_dict(),
                      "train_config": self.cfg, "model": self.model.state_dict(), "step": self.step}
             if self.cfg["code_map"]["identities"]:
-                code_map, gate = self.fit_code_map()
-                state["code_map"] = torch.from_numpy(code_map)
-                if gate is not None:
-                    state["code_map_gate"] = torch.from_numpy(gate)
+                put_code_map(state, *self.fit_code_map())
             save_checkpoint(path, state)
 
     def fit_code_map(self) -> tuple[np.ndarray, np.ndarray | None]:

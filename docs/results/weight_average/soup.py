@@ -13,7 +13,7 @@ import argparse
 import torch
 
 from retarget.api import Retargeter
-from retarget.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+from retarget.checkpoint import load_checkpoint, model_from_checkpoint, put_code_map, save_checkpoint
 from retarget.code_map import fit_code_map
 
 
@@ -40,11 +40,8 @@ def main() -> None:
     model = model_from_checkpoint(state, args.out)
     c = sb["train_config"]["code_map"]
     if c["identities"]:
-        code_map, gate = fit_code_map(Retargeter(model, torch.device("cpu")), c["identities"],
-                                      c["seed"], c["ridge"], c["gated"])
-        state["code_map"] = torch.from_numpy(code_map)
-        if gate is not None:
-            state["code_map_gate"] = torch.from_numpy(gate)
+        put_code_map(state, *fit_code_map(Retargeter(model, torch.device("cpu")), c["identities"],
+                                          c["seed"], c["ridge"], c["gated"]))
     save_checkpoint(args.out, state)
     print(f"wrote {args.out} (alpha {args.alpha})")
 
