@@ -266,3 +266,11 @@ def test_the_shipped_face_model_is_what_the_builder_makes():
 
     for shipped, built in zip(upright_face_model(), build_upright_face_model()):
         np.testing.assert_allclose(shipped, built, rtol=1e-5, atol=1e-5)
+
+
+def test_a_rolled_head_is_turned_back():
+    v, f = arkit_neutral()
+    a = np.radians(10.0)
+    roll = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    rotation = upright_rotation(v @ roll.T, f)                   # roll is a sideways turn
+    assert rotation is not None and rotation_angle(rotation @ roll) < 1.0
