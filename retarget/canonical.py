@@ -393,13 +393,13 @@ def build_upright_face_model() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def write_upright_face_model(path=UPRIGHT_MODEL_PATH) -> Path:
     """Write :func:`build_upright_face_model` to ``path`` (npz of mean, shapes, variances, float32;
     atomically)."""
-    path = Path(path)
+    from .io import atomic_output
+
     mean, shapes, variances = build_upright_face_model()
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez_compressed(tmp, mean=mean.astype(np.float32), shapes=shapes.astype(np.float32),
-                        variances=variances.astype(np.float32))
-    tmp.replace(path)
-    return path
+    with atomic_output(path) as tmp:
+        np.savez_compressed(tmp, mean=mean.astype(np.float32), shapes=shapes.astype(np.float32),
+                            variances=variances.astype(np.float32))
+    return Path(path)
 
 
 @lru_cache(maxsize=1)
@@ -414,14 +414,16 @@ def upright_face_model() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                             f"unreadable ({e}); reinstall the package") from None
 
 
+def axis_angle_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """(3,3) rotation by ``angle`` radians about the unit vector ``axis`` (3,) (Rodrigues)."""
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+
+
 def _skew_exp(w: np.ndarray) -> np.ndarray:
-    """exp of the cross-product matrix of w (3,): the rotation by |w| radians about w (Rodrigues)."""
+    """exp of the cross-product matrix of w (3,): the rotation by |w| radians about w."""
     theta = float(np.linalg.norm(w))
-    if theta < 1e-15:
-        return np.eye(3)
-    k = w / theta
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(theta) * kx + (1.0 - np.cos(theta)) * kx @ kx
+    return np.eye(3) if theta < 1e-15 else axis_angle_rotation(w / theta, theta)
 
 
 def _icp(tree, points: np.ndarray, normals: np.ndarray, steps: int, rotation: np.ndarray,

@@ -32,7 +32,7 @@ from data_synth.sampling import sample_weights
 from data_synth.tessellate import tessellate
 
 from .errors import RetargetError
-from .canonical import Canonicaliser
+from .canonical import Canonicaliser, axis_angle_rotation, rotation_angle, upright_rotation
 from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh
 
 PAIR_KINDS = ("self", "cross_topology", "cross_identity")
@@ -172,9 +172,7 @@ def random_rotation(rng: np.random.Generator, max_deg: float) -> np.ndarray:
     """A rotation (3,3) about a random axis by an angle uniform in [-max_deg, max_deg] degrees."""
     axis = rng.normal(size=3)
     axis /= np.linalg.norm(axis)
-    a = np.deg2rad(rng.uniform(-max_deg, max_deg))
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * (k @ k)
+    return axis_angle_rotation(axis, np.deg2rad(rng.uniform(-max_deg, max_deg)))
 
 
 class TargetPool:
@@ -315,8 +313,6 @@ def upright_rig(rig):
     (``retarget.canonical.upright_rotation``; the rig itself otherwise), so that fine-tuning sees
     the head as ``Retargeter`` will: the neutral, its shapes and its identity shapes turned alike."""
     import dataclasses
-
-    from .canonical import rotation_angle, upright_rotation
 
     rotation = upright_rotation(rig.neutral.astype(np.float64), rig.faces)
     if rotation is None:

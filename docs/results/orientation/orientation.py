@@ -56,6 +56,7 @@ def main(argv=None) -> int:
     from retarget.api import Retargeter
     from retarget.canonical import Canonicaliser
     from retarget.evaluate import RealRig, arkit_ict_matrix, ict_to_arkit_weights
+    from retarget.io import atomic_output
     from retarget.mesh import Mesh
 
     from data_synth.makehuman import (base_head_rig, build_head_rig, head_tessellation,
@@ -131,10 +132,8 @@ def main(argv=None) -> int:
     table = "\n".join(lines) + "\n"
     print(table)
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = args.out.with_suffix(args.out.suffix + ".tmp")
-        tmp.write_text(table)
-        tmp.replace(args.out)
+        with atomic_output(args.out) as tmp:
+            Path(tmp).write_text(table)
     return 0
 
 
