@@ -45,7 +45,7 @@ from .checkpoint import checkpoint_code_map, load_checkpoint, model_from_checkpo
 from .code_map import check_code_map, check_gate, head_code_map
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
-from .mesh import Mesh, as_mesh, is_mesh_like
+from .mesh import Mesh, as_mesh, face_part, is_mesh_like, submesh
 from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh, vertex_features
 from .smoothing import smooth_codes
 
@@ -80,10 +80,13 @@ def default_checkpoint_path() -> Path:
 class Target:
     """A prepared target neutral mesh (``Retargeter.prepare``).
 
-    mesh: the user's mesh (its frame and units). proxy: the prepared (canonical) mesh the encoders
-    ran on — the mesh itself, or its decimated proxy for large meshes. feat: (V,6) float32 canonical
-    features of every vertex of ``mesh``. c: (128,) image code; codes: z_ID and skinning weights
-    (ω_Skin per vertex of ``mesh``).
+    mesh: the user's mesh (its frame and units). face: None, or for a mesh with separate parts
+    (eyeballs, teeth, ...) the indices (V',) int64 of the face's vertices in ``mesh``
+    (``retarget.mesh.face_part``): the network sees the face alone and the other parts keep their
+    place. proxy: the prepared (canonical) mesh the encoders ran on — the face, or its decimated
+    proxy for large meshes. feat: (V',6) float32 canonical features of every vertex of the face
+    (V' = V without parts). c: (128,) image code; codes: z_ID and skinning weights (ω_Skin per
+    vertex of the face).
     """
 
     mesh: Mesh
@@ -91,10 +94,24 @@ class Target:
     feat: torch.Tensor
     c: torch.Tensor
     codes: TargetCodes
+    face: np.ndarray | None = None
 
     @property
     def n_vertices(self) -> int:
         return self.mesh.n_vertices
+
+    def on_mesh(self, d: np.ndarray) -> np.ndarray:
+        """Displacements (..., V', 3) of the face's vertices -> (..., V, 3) of the mesh's, zero on
+        its other parts (the array itself without parts)."""
+        if self.face is None:
+            return d
+        out = np.zeros(d.shape[:-2] + (self.n_vertices, 3), d.dtype)
+        out[..., self.face, :] = d
+        return out
+
+    def on_face(self, values: np.ndarray) -> np.ndarray:
+        """Per-vertex values (V, ...) of the mesh -> (V', ...) of the face's vertices."""
+        return values if self.face is None else values[self.face]
 
 
 @dataclass
@@ -117,7 +134,10 @@ class SourceTopology:
     """What every frame of one source topology shares, kept across calls (``Retargeter.encode``).
 
     faces: (F',3) int64 faces of the encoded mesh (the proxy's for sources above ``proxy_vertices``).
-    cluster: (V,) int64 proxy vertex of each source vertex, or None (the mesh itself is encoded).
+    cluster: (V',) int64 proxy vertex of each vertex of the face, or None (the face itself is
+    encoded). face: None, or the indices (V',) int64 of the face's vertices in a source mesh with
+    separate parts (eyeballs, teeth, ...; ``retarget.mesh.face_part``): the encoder sees the face
+    alone.
     canon: the canonicaliser of the reference mesh (the source neutral, or the first frame seen).
     ops: the operators of the reference's canonical mesh; ops_t: the same on the device.
     neutral: for an entry of a source neutral, (its proxy's canonical vertices (V',3) float32, their
@@ -130,13 +150,15 @@ class SourceTopology:
     ops: Operators
     ops_t: TorchOperators
     neutral: tuple[np.ndarray, np.ndarray] | None = None
+    face: np.ndarray | None = None
 
     def proxy(self, mesh: Mesh) -> Mesh:
-        """The mesh the encoder sees for a frame of this topology: the frame, or its proxy (each
-        proxy vertex the mean of its cluster)."""
+        """The mesh the encoder sees for a frame of this topology: the frame's face, or its proxy
+        (each proxy vertex the mean of its cluster)."""
+        v = mesh.vertices if self.face is None else mesh.vertices[self.face]
         if self.cluster is None:
-            return mesh
-        return Mesh(cluster_means(mesh.vertices, self.cluster), self.faces, mesh.name)
+            return Mesh(v, self.faces, mesh.name) if self.face is not None else mesh
+        return Mesh(cluster_means(v, self.cluster), self.faces, mesh.name)
 
 
 def _digest(array: np.ndarray) -> str:
@@ -157,14 +179,16 @@ def source_frames(frames) -> tuple[list[Mesh], bool]:
 def basis_shapes(target: "Target", dims: slice, code_map: np.ndarray | None = None) -> np.ndarray:
     """The basis decoder's rig on a prepared target, the code dims ``dims`` of it, as shapes in the
     target's units: (K, V, 3) float32 (``dims`` = slice(0, 53): the baked FACS shapes). With
-    ``code_map`` (code_dim, K) the shapes of its K columns as codes instead (``dims`` ignored)."""
+    ``code_map`` (code_dim, K) the shapes of its K columns as codes instead (``dims`` ignored).
+    Zero on a mesh's parts beside the face (``Target.face``)."""
     basis = target.codes.basis
     if code_map is None:
         basis = basis[:, :, dims]
     else:
         basis = basis @ torch.as_tensor(code_map, dtype=basis.dtype, device=basis.device)
     shapes = basis.permute(2, 0, 1).cpu().numpy()
-    return np.ascontiguousarray(target.proxy.canon.displacement_from_canonical(shapes), np.float32)
+    return np.ascontiguousarray(target.on_mesh(target.proxy.canon.displacement_from_canonical(shapes)),
+                                np.float32)
 
 
 _BLAS_POOLS = None   # threadpoolctl's view of the BLAS libraries numpy and scipy load (lazily)
@@ -361,7 +385,10 @@ class Retargeter:
     decoded at once. cache_dir: the on-disk operator cache (``nets.geometry``). source_cache_size:
     source topologies whose operators are kept in memory across calls (``encode``; 0 = none).
     upright: turn heads tilted from facing +z upright before the network sees them, and the
-    results back (``canonicaliser``; False: every mesh as it faces).
+    results back (``canonicaliser``; False: every mesh as it faces). face_only: for a mesh with
+    separate parts (eyeballs, teeth, a tongue, lashes beside the skin), the network sees the
+    face alone (``retarget.mesh.face_part``: the part with the most vertices) and the other parts
+    keep their place in every result (False: the whole mesh is the face).
     """
 
     #: Analysis-by-synthesis (``refine``): weight of the pull towards the encoder's estimate,
@@ -399,7 +426,8 @@ class Retargeter:
     def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
                  refine_steps: int = 0, code_map: np.ndarray | None = None,
-                 code_map_gate: np.ndarray | None = None, upright: bool = True):
+                 code_map_gate: np.ndarray | None = None, upright: bool = True,
+                 face_only: bool = True):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
@@ -414,6 +442,7 @@ class Retargeter:
         self._sources: OrderedDict[tuple, SourceTopology] = OrderedDict()
         self.refine_steps = refine_steps   # gradient steps on the free dims of z_GE after the fit
         self.upright = upright             # turn tilted heads upright first (``canonicaliser``)
+        self.face_only = face_only         # the network sees a mesh's face part alone
 
     @property
     def code_map(self) -> np.ndarray | None:
@@ -494,10 +523,15 @@ class Retargeter:
     @torch.no_grad()
     def prepare(self, mesh) -> Target:
         """Operators, frontal image, z_ID and skinning weights of a target neutral mesh: a Mesh, a
-        ``trimesh.Trimesh`` or a ``(vertices, faces)`` pair (a Target is returned as it is)."""
+        ``trimesh.Trimesh`` or a ``(vertices, faces)`` pair (a Target is returned as it is). Of
+        its face alone when it has separate parts and ``face_only`` (``Target.face``)."""
         if isinstance(mesh, Target):
             return mesh
         mesh = as_mesh(mesh, role="target")
+        face = face_part(mesh) if self.face_only else None
+        if face is not None:                    # the face alone; the other parts keep their place
+            t = self.prepare(submesh(mesh, face))
+            return Target(mesh, t.proxy, t.feat, t.c, t.codes, face)
         check_head_like(mesh, "target")
         if mesh.n_vertices > self.proxy_vertices:
             (pv, pf), cluster = cluster_decimate(mesh.vertices, mesh.faces, self.proxy_vertices)
@@ -531,7 +565,7 @@ class Retargeter:
         The key is the vertex count and a hash of the face array, plus a hash of the vertices when
         ``ref`` is a source neutral (``neutral``), so each neutral keeps its own entry while frames
         without one share the entry of the first frame of their topology, and with it the turn
-        that frame needed to face +z (``canonicaliser``). The cache is an LRU of
+        that frame needed to face +z (``canonicaliser``) and its face part (``face_only``). The cache is an LRU of
         ``source_cache_size`` entries (0 = no cache: computed on every call);
         :meth:`clear_source_cache` empties it.
         """
@@ -539,14 +573,18 @@ class Retargeter:
         if key in self._sources:
             self._sources.move_to_end(key)
             return self._sources[key]
-        faces, cluster = ref.faces, None
-        if ref.n_vertices > self.proxy_vertices:
-            (_, faces), cluster = cluster_decimate(ref.vertices, ref.faces, self.proxy_vertices)
-        pv = ref.vertices if cluster is None else cluster_means(ref.vertices, cluster)
+        face = face_part(ref) if self.face_only else None
+        own = ref if face is None else submesh(ref, face)   # the face alone
+        if face is not None:
+            check_head_like(own, "source")
+        faces, cluster = own.faces, None
+        if own.n_vertices > self.proxy_vertices:
+            (_, faces), cluster = cluster_decimate(own.vertices, own.faces, self.proxy_vertices)
+        pv = own.vertices if cluster is None else cluster_means(own.vertices, cluster)
         canon = self.canonicaliser(pv, faces, ref.name or "source")
         ops = load_or_compute_operators(canon.to_canonical(pv).astype(np.float32), faces,
                                         self.cfg.k_eig, cache_dir=self.cache_dir)
-        src = SourceTopology(faces, cluster, canon, ops, ops.to_torch(self.device))
+        src = SourceTopology(faces, cluster, canon, ops, ops.to_torch(self.device), face=face)
         if self.source_cache_size > 0:
             self._sources[key] = src
             while len(self._sources) > self.source_cache_size:
@@ -754,11 +792,11 @@ class Retargeter:
         canonical squared error of the decoded source neutral against ``frame`` (V,3), on up to
         ``REFINE_ROWS`` vertices -> (code_dim − 53,) float32."""
         t = rig.target
-        n = t.n_vertices
+        n = len(t.feat)                                   # the face's vertices
         rows = (np.random.default_rng(0).choice(n, self.REFINE_ROWS, replace=False)
                 if n > self.REFINE_ROWS else np.arange(n))
         goal = torch.from_numpy(t.proxy.canon.displacement_to_canonical(
-            frame[rows] - t.mesh.vertices[rows]).astype(np.float32)).to(self.device)
+            t.on_face(frame)[rows] - t.on_face(t.mesh.vertices)[rows]).astype(np.float32)).to(self.device)
         rows_t = torch.from_numpy(rows).to(self.device)
         w_t = torch.from_numpy(w).to(self.device)
         free = torch.zeros(self.cfg.code_dim - N_FACS, device=self.device, requires_grad=True)
@@ -795,7 +833,7 @@ class Retargeter:
             with torch.no_grad():
                 dv = self.model.decode_target(target.feat, target.c, target.codes, zi, chunk=self.chunk)
             yield (target.mesh.vertices
-                   + target.proxy.canon.displacement_from_canonical(dv.cpu().numpy()))
+                   + target.on_mesh(target.proxy.canon.displacement_from_canonical(dv.cpu().numpy())))
 
     def expression_codes(self, source, source_neutral: Mesh | None = None,
                          smooth: str | None = None, fps: float = 30.0,

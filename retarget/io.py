@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RetargetError, RetargetWarning
-from .mesh import Mesh, as_mesh, check_mesh, is_mesh_like
+from .mesh import Mesh, as_mesh, check_mesh, is_mesh_like, mesh_parts
 
 READ_FORMATS = (".obj", ".ply", ".off", ".glb", ".gltf")
 WRITE_FORMATS = (".obj", ".ply")
@@ -349,23 +349,17 @@ class SeveralHeadsWarning(RetargetWarning):
 
 
 def warn_if_several_heads(mesh: Mesh, path) -> None:
-    """SeveralHeadsWarning if the two largest connected parts of the mesh each hold at least a
-    quarter of its vertices and their bounding boxes are apart: most likely two heads in one file,
-    which the network would treat as one. (Eyes, teeth and other small parts do not count.)"""
-    import scipy.sparse
-    from scipy.sparse.csgraph import connected_components
-
-    f, n = mesh.faces, mesh.n_vertices
-    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
-    graph = scipy.sparse.coo_matrix((np.ones(len(edges), np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    count, labels = connected_components(graph, directed=False)
+    """SeveralHeadsWarning if the two largest parts of the mesh (``retarget.mesh.mesh_parts``,
+    welded along seams) each hold at least a quarter of its vertices and their bounding boxes are
+    apart: most likely two heads in one file, which the network would treat as one. (Eyes, teeth
+    and other small parts do not count.)"""
+    labels = mesh_parts(mesh.vertices, mesh.faces)
+    count = int(labels.max()) + 1
     if count < 2:
         return
-    used = np.zeros(n, bool)
-    used[f.ravel()] = True
-    sizes = np.bincount(labels[used], minlength=count)
+    sizes = np.bincount(labels[labels >= 0], minlength=count)
     a, b = np.argsort(sizes)[::-1][:2]
-    if sizes[b] < 0.25 * used.sum():
+    if sizes[b] < 0.25 * (labels >= 0).sum():
         return
     va, vb = mesh.vertices[labels == a], mesh.vertices[labels == b]
     if (va.min(0) > vb.max(0)).any() or (vb.min(0) > va.max(0)).any():

@@ -71,6 +71,67 @@ class Mesh:
         return Mesh(self.vertices.copy(), self.faces.copy(), self.name)
 
 
+#: vertices closer than this share of the mesh's bounding-box diagonal count as one position when
+#: parts are told apart (``mesh_parts``): a mesh split along its UV seams stays one part
+WELD_TOLERANCE = 1e-6
+
+
+def mesh_parts(vertices: np.ndarray, faces: np.ndarray, weld: bool = True) -> np.ndarray:
+    """The connected part of each vertex: (V,) int64 labels 0..P-1, −1 for a vertex no face uses.
+    vertices (V,3), faces (F,3) int. With ``weld``, vertices at one position (within
+    ``WELD_TOLERANCE`` of the bounding-box diagonal) are joined, so pieces that only share
+    positions, as a mesh split along its UV seams (every glTF file) is, count as one part."""
+    import scipy.sparse
+    from scipy.sparse.csgraph import connected_components
+
+    v = np.asarray(vertices, np.float64)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    n = len(v)
+    used = np.zeros(n, bool)
+    used[f.ravel()] = True
+
+    def parts(node: np.ndarray) -> np.ndarray:      # node (V,): the graph node of each vertex
+        edges = node[np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])]
+        graph = scipy.sparse.coo_matrix((np.ones(len(edges), np.int8), (edges[:, 0], edges[:, 1])),
+                                        shape=(n, n))
+        labels = np.where(used, connected_components(graph, directed=False)[1][node], -1)
+        _, dense = np.unique(labels[used], return_inverse=True)   # parts numbered 0..P-1
+        labels[used] = dense.ravel()
+        return labels.astype(np.int64)
+
+    labels = parts(np.arange(n))
+    if not weld or labels.max() < 1:
+        return labels
+    step = WELD_TOLERANCE * max(float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))), 1e-300)
+    q = np.round(v / step).astype(np.int64)
+    order = np.lexsort(q.T[::-1])                   # equal positions next to each other
+    first = np.r_[True, (q[order][1:] != q[order][:-1]).any(axis=1)]
+    node = np.empty(n, np.int64)
+    node[order] = np.cumsum(first) - 1
+    return parts(node)
+
+
+def face_part(mesh: "Mesh") -> np.ndarray | None:
+    """The vertices of the face of a mesh with separate parts (eyeballs, teeth, a tongue, lashes
+    or a mouth bag beside the skin): the part (``mesh_parts``, welded) with the most vertices, as
+    sorted indices (V',) int64 into ``mesh.vertices``; None when that part is every vertex (a mesh
+    of one part, however it is split along its seams)."""
+    labels = mesh_parts(mesh.vertices, mesh.faces)
+    counts = np.bincount(labels[labels >= 0])
+    if len(counts) == 1 and (labels >= 0).all():
+        return None
+    return np.flatnonzero(labels == int(np.argmax(counts)))
+
+
+def submesh(mesh: "Mesh", index: np.ndarray) -> "Mesh":
+    """The mesh of the vertices ``index`` (V',) int (sorted, unique) and the faces whose three
+    corners are among them, re-indexed; vertex i of it is vertex index[i] of ``mesh``."""
+    new = np.full(mesh.n_vertices, -1, np.int64)
+    new[index] = np.arange(len(index))
+    faces = new[mesh.faces]
+    return Mesh(mesh.vertices[index], faces[(faces >= 0).all(axis=1)], mesh.name)
+
+
 MESH_TYPES = "a retarget Mesh, a trimesh.Trimesh or a (vertices (V,3), faces (F,3)) pair"
 
 

@@ -258,3 +258,70 @@ def test_a_tilted_head_is_turned_upright_and_back(tmp_path):
            for name, r in (("upright", up), ("as it faces", flat))}
     assert err["upright"] < 0.05 and err["as it faces"] > 0.2, err   # 0.028, 0.27; 0.086 if the
     # motion came back unturned
+
+
+# ------------------------------------------------------------------------------- separate parts
+def with_parts(head: Mesh, seed: int = 0) -> Mesh:
+    """``head`` and, appended after its vertices, two eyeballs and a teeth block inside it: separate
+    parts (42 + 42 + 8 vertices), shifted by a random few millimetres with ``seed`` > 0 (a frame
+    in which the parts moved on their own)."""
+    import trimesh
+
+    parts = [trimesh.creation.icosphere(subdivisions=1, radius=1.2).apply_translation((x, 3.0, 5.0))
+             for x in (-3.0, 3.0)] + [trimesh.creation.box((5.0, 1.0, 1.5)).apply_translation((0, -5, 4))]
+    v, f = [head.vertices], [head.faces]
+    n = head.n_vertices
+    for p in parts:
+        v.append(np.asarray(p.vertices) + np.random.default_rng(seed).normal(0, 0.3, 3) * (seed > 0))
+        f.append(np.asarray(p.faces) + n)
+        n += len(p.vertices)
+    return Mesh(np.concatenate(v), np.concatenate(f), head.name)
+
+
+def test_mesh_parts_weld_seams_and_the_face_is_the_largest_part():
+    from retarget.mesh import face_part, mesh_parts, submesh
+
+    head = head_mesh(2)
+    full = with_parts(head)
+    labels = mesh_parts(full.vertices, full.faces)
+    assert labels.max() == 3 and len(np.unique(labels[:head.n_vertices])) == 1
+    assert np.array_equal(face_part(full), np.arange(head.n_vertices))
+    sub = submesh(full, face_part(full))
+    assert np.array_equal(sub.vertices, head.vertices) and np.array_equal(sub.faces, head.faces)
+    assert face_part(head) is None
+    # split along a seam: the faces with x < 0 get their own copies of the vertices they share
+    # with the others (as a glTF file holds a mesh cut along its UV seams); welded, one part
+    left = head.vertices[head.faces].mean(1)[:, 0] < 0
+    copies = np.intersect1d(head.faces[left], head.faces[~left])
+    new = np.arange(head.n_vertices)
+    new[copies] = head.n_vertices + np.arange(len(copies))
+    faces = np.where(left[:, None], new[head.faces], head.faces)
+    split = Mesh(np.concatenate([head.vertices, head.vertices[copies]]), faces)
+    assert mesh_parts(split.vertices, split.faces, weld=False).max() == 1
+    assert mesh_parts(split.vertices, split.faces).max() == 0 and face_part(split) is None
+    # a vertex no face uses is no part, and not the face's
+    loose = Mesh(np.concatenate([head.vertices, [[0.0, 0.0, 0.0]]]), head.faces)
+    assert mesh_parts(loose.vertices, loose.faces)[-1] == -1
+    assert np.array_equal(face_part(loose), np.arange(head.n_vertices))
+
+
+def test_separate_parts_are_left_out_and_keep_their_place(r, ckpt, tmp_path):
+    """Eyeballs and teeth beside the skin: the network sees the face alone, so every result on the
+    face is what the head alone gives, and the parts keep their place (however they move in the
+    source's frames); face_only=False feeds the whole mesh as before."""
+    head, smile = head_mesh(2), head_mesh(2, smile=2.0)
+    full = with_parts(head)
+    n = head.n_vertices
+    frames = [with_parts(smile, seed=1), with_parts(head, seed=2)]
+    alone = r.transfer([smile, head], head, source_neutral=head, refine=True)
+    both = r.transfer(frames, full, source_neutral=full, refine=True)
+    assert both.shape == (2, full.n_vertices, 3)
+    assert np.allclose(both[:, :n], alone, atol=1e-5)        # float32 sums: 1e-6 apart
+    assert np.array_equal(both[:, n:], np.broadcast_to(full.vertices[n:], both[:, n:].shape))
+    assert np.allclose(r.invert(frames, source_neutral=full, refine=True),
+                       r.invert([smile, head], source_neutral=head, refine=True), atol=1e-6)
+    baked = r.bake(full)
+    assert baked.deltas.shape == (53, full.n_vertices, 3) and not baked.deltas[:, n:].any()
+    assert np.allclose(baked.deltas[:, :n], r.bake(head).deltas, atol=1e-6)
+    whole = Retargeter.load(ckpt, device="cpu", cache_dir=tmp_path, face_only=False)
+    assert np.abs(whole.transfer(frames, full)[:, n:] - full.vertices[n:]).max() > 1e-3

@@ -299,3 +299,19 @@ def test_a_tilted_head_is_reported_and_no_upright_keeps_it(tmp_path, capsys):
     assert main(["animate", *common, "-o", str(tmp_path / "b.obj"), "--no-upright"]) == 0
     assert "turned" not in capsys.readouterr().err
     assert not np.allclose(load_mesh(tmp_path / "a.obj").vertices, load_mesh(tmp_path / "b.obj").vertices)
+
+
+def test_separate_parts_are_reported_and_all_parts_feeds_them(tmp_path, capsys):
+    from .test_api import with_parts
+
+    full = with_parts(head_mesh(2))
+    save_mesh(tmp_path / "parts.obj", full)
+    (tmp_path / "w.json").write_text('{"jawOpen": 0.8}')
+    common = [str(tmp_path / "parts.obj"), "--weights", str(tmp_path / "w.json"), "--checkpoint",
+              str(tiny_checkpoint(tmp_path / "tiny.pt")), "--device", "cpu"]
+    assert main(["animate", *common, "-o", str(tmp_path / "a.obj")]) == 0
+    assert "parts.obj: the network saw the face alone (162 of 254 vertices" in capsys.readouterr().err
+    assert np.allclose(load_mesh(tmp_path / "a.obj").vertices[162:], full.vertices[162:], atol=1e-6)
+    assert main(["animate", *common, "-o", str(tmp_path / "b.obj"), "--all-parts"]) == 0
+    assert "face alone" not in capsys.readouterr().err
+    assert np.abs(load_mesh(tmp_path / "b.obj").vertices[162:] - full.vertices[162:]).max() > 1e-3

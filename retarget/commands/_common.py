@@ -31,6 +31,10 @@ def add_model_args(p) -> None:
                    help="take every mesh as it faces: do not turn a head pitched 9 degrees or more, "
                         "or turned sideways 4 or more, upright first (docs/RESULTS.md, \"Heads that "
                         "do not face +z\")")
+    p.add_argument("--all-parts", action="store_true",
+                   help="the whole mesh is the face: do not leave separate parts (eyes, teeth, a "
+                        "tongue, lashes: every part but the one with the most vertices) out of the "
+                        "network (docs/RESULTS.md, \"Heads with eyes and teeth\")")
 
 
 def add_neutral_args(p) -> None:
@@ -126,20 +130,28 @@ def print_neutral_hint(args) -> None:
         print(hint, file=sys.stderr)
 
 
-def print_turns(r, target=None, target_name: str = "", frames=None, neutral=None,
+def print_notes(r, target=None, target_name: str = "", frames=None, neutral=None,
                 source_name: str = "") -> None:
-    """A note on stderr for each head that ``r`` turned upright before the network saw it
-    (``Retargeter.canonicaliser``): ``target`` a prepared Target, and the source (``frames`` with
+    """Notes on stderr on what ``r`` did to a head before the network saw it: turned it upright
+    (``Retargeter.canonicaliser``), or took its face alone from a mesh with separate parts
+    (``Retargeter.face_only``). ``target`` a prepared Target, and the source (``frames`` with
     their ``neutral`` or None, after they were encoded: their topology is cached)."""
     from ..canonical import rotation_angle
 
-    canons = []
+    heads = []
     if target is not None:
-        canons.append((target_name, target.proxy.canon))
+        heads.append((target_name, target.proxy.canon, target.face, target.n_vertices,
+                      "keep their place in the results"))
     if frames is not None:
         ref = neutral if neutral is not None else frames[0]
-        canons.append((source_name, r.source_topology(ref, neutral=neutral is not None).canon))
-    for name, canon in canons:
+        src = r.source_topology(ref, neutral=neutral is not None)
+        heads.append((source_name, src.canon, src.face, ref.n_vertices, "are left out"))
+    for name, canon, face, n, parts in heads:
+        if face is not None:
+            print(f"{name}: the network saw the face alone ({len(face):,} of {n:,} vertices, the "
+                  f"part with the most); the other {n - len(face):,} vertices (separate parts: "
+                  f"eyes, teeth, ...) {parts} (--all-parts: the whole mesh is the face)",
+                  file=sys.stderr)
         if canon.rotation is not None:
             print(f"{name}: the head is turned {rotation_angle(canon.rotation):.1f} degrees from facing "
                   "+z; the network saw it upright, the results are in its own frame (--no-upright: "
@@ -188,7 +200,8 @@ def retargeter(args):
     extra = {"code_map": None} if getattr(args, "no_code_map", False) else {}
     return Retargeter.load(args.checkpoint, device=args.device,
                            refine_steps=getattr(args, "refine_steps", 0),
-                           upright=not getattr(args, "no_upright", False), **extra)
+                           upright=not getattr(args, "no_upright", False),
+                           face_only=not getattr(args, "all_parts", False), **extra)
 
 
 def rotation(args) -> np.ndarray:

@@ -1,7 +1,7 @@
 """``retarget animate``: drive a target mesh from FACS weights, without building a rig."""
 from __future__ import annotations
 
-from ._common import (add_model_args, output_paths, print_turns, read_weights_file, retargeter,
+from ._common import (add_model_args, output_paths, print_notes, read_weights_file, retargeter,
                       write_frames)
 from .export_rig import add_usd_arg, check_usd_output, write_rig
 
@@ -42,7 +42,7 @@ def run(args) -> int:
                      len(target.faces), args.force)
     r = retargeter(args)
     tgt = r.prepare(target)
-    print_turns(r, tgt, args.target)
+    print_notes(r, tgt, args.target)
 
     n = len(track.weights)
     if usd:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 
-from ._common import add_model_args, print_turns, read_weights_file, retargeter, rotation
+from ._common import add_model_args, print_notes, read_weights_file, retargeter, rotation
 
 HELP = ("export a 53-shape blendshape rig (GLB morph targets or UsdSkel blend shapes, ICT names) for "
         "the neutral TGT")
@@ -47,7 +47,7 @@ def run(args) -> int:
     target = load_mesh(args.target, up=args.up, forward=args.forward, force=args.force)
     r = retargeter(args)
     tgt = r.prepare(target)
-    print_turns(r, tgt, args.target)
+    print_notes(r, tgt, args.target)
     rig = r.bake(tgt)
     names, anim = write_rig(args.out, rig, target.faces, track, args, args.names)
     print(f"wrote {args.out}: {len(names)} {'blend shapes' if is_usd_path(args.out) else 'morph targets'} "

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from ._common import (add_model_args, add_neutral_args, add_residuals_arg, add_smooth_arg,
                       check_neutral_args, check_residuals_arg, estimated_neutral,
-                      load_source_neutral, print_neutral_hint, print_turns, retargeter,
+                      load_source_neutral, print_neutral_hint, print_notes, retargeter,
                       write_residuals)
 
 HELP = "inverse rigging: FRAMES (a mesh, folder or glob) -> a CSV of 53 named weights per frame"
@@ -40,7 +40,7 @@ def run(args) -> int:
     r = retargeter(args)
     neutral = estimated_neutral(args, r, frames, neutral)
     w = r.invert(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True, refine=args.refine)
-    print_turns(r, frames=frames, neutral=neutral, source_name=args.source_neutral or args.frames)
+    print_notes(r, frames=frames, neutral=neutral, source_name=args.source_neutral or args.frames)
     write_weights_csv(args.out, w.reshape(len(frames), -1), names=args.names, fps=args.fps)
     print(f"wrote {len(frames)} frame(s) of 53 weights to {args.out}")
     if args.residuals:

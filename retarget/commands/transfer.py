@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from ._common import (add_model_args, add_neutral_args, add_residuals_arg, add_smooth_arg,
                       check_neutral_args, check_residuals_arg, estimated_neutral,
-                      load_source_neutral, output_paths, print_neutral_hint, print_turns, retargeter,
+                      load_source_neutral, output_paths, print_neutral_hint, print_notes, retargeter,
                       write_frames, write_residuals)
 
 HELP = "clone expression(s) of SRC (a mesh, a folder or a glob of frames) onto the neutral TGT"
@@ -47,7 +47,7 @@ def run(args) -> int:
     z = r.expression_codes(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
                            refine=args.refine)
     z = z.reshape(-1, z.shape[-1])
-    print_turns(r, tgt, args.target, frames, neutral, args.source_neutral or args.source)
+    print_notes(r, tgt, args.target, frames, neutral, args.source_neutral or args.source)
     written = write_frames(args.out, r.iter_decode(tgt, z, progress=True), target.faces, inputs,
                            args, fps=args.fps, n_frames=len(z))
     print(f"wrote {len(frames)} frame(s) on {target.n_vertices} target vertices to "
