@@ -32,6 +32,7 @@ from data_synth.sampling import sample_weights
 from data_synth.tessellate import tessellate
 
 from .errors import RetargetError
+from .mesh import Mesh, face_part, submesh
 from .canonical import Canonicaliser, axis_angle_rotation, rotation_angle, upright_rotation
 from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh
 
@@ -308,6 +309,24 @@ def make_source(entry: Entry, weights: np.ndarray, kind: str, rng: np.random.Gen
 
 
 
+def face_rig(rig):
+    """A user's rig (``retarget.user_rig.UserRig``) on its face alone when its neutral has separate
+    parts (eyeballs, teeth, ...: ``retarget.mesh.face_part``; the rig itself otherwise), so that
+    fine-tuning sees the head as ``Retargeter`` will: the neutral, its faces, shapes, identity
+    shapes and segments restricted to the face's vertices."""
+    import dataclasses
+
+    face = face_part(Mesh(rig.neutral, rig.faces))
+    if face is None:
+        return rig
+    print(f"{rig.name}: fine-tuning on the face alone ({len(face):,} of {rig.n_vertices:,} vertices, "
+          "the part with the most); its other parts (eyes, teeth, ...) are left out", flush=True)
+    return dataclasses.replace(
+        rig, neutral=rig.neutral[face], faces=submesh(Mesh(rig.neutral, rig.faces), face).faces,
+        deltas=rig.deltas[:, face], segments=None if rig.segments is None else rig.segments[face],
+        identity_deltas=None if rig.identity_deltas is None else rig.identity_deltas[:, face])
+
+
 def upright_rig(rig):
     """A user's rig (``retarget.user_rig.UserRig``) turned upright when its neutral is tilted
     (``retarget.canonical.upright_rotation``; the rig itself otherwise), so that fine-tuning sees
@@ -344,7 +363,8 @@ class RigPool:
             raise RetargetError(f"data.rig_mix must be in [0, 1], got {self.mix}")
         rig = load_user_rig(data_cfg["rig"], data_cfg["keep_vertices"],
                             strict=bool(data_cfg.get("rig_strict", False)))
-        if model_cfg.canonical == "face":   # a tilted head is turned upright, as Retargeter does
+        rig = face_rig(rig)                 # the face alone and upright, as Retargeter sees it
+        if model_cfg.canonical == "face":
             rig = upright_rig(rig)
         if rig.segments is not None and rig.segments.max() >= model_cfg.n_segments:
             raise RetargetError(f"{rig.name}: segment labels reach {int(rig.segments.max())}, but the "

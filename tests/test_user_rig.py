@@ -308,3 +308,23 @@ def test_a_tilted_rig_is_fine_tuned_upright(tmp_path):
     assert np.allclose(q, p @ rotation.T, atol=1e-3)
     assert rotation_angle(rotation @ turn) < 2.0
     assert np.allclose(turned.deltas, tilted.deltas @ rotation.T.astype(np.float32), atol=1e-4)
+
+
+def test_a_rig_with_separate_parts_is_fine_tuned_on_its_face(tmp_path, capsys):
+    from retarget.training_data import face_rig
+
+    from .test_api import with_parts
+
+    a = np.load(ROOT / "data_synth" / "makehuman" / "data" / "makehuman_arkit.npz", allow_pickle=False)
+    n = len(a["neutral"])
+    full = with_parts(Mesh(a["neutral"].astype(np.float64), a["faces"].astype(np.int64)))
+    extra = full.n_vertices - n
+    deltas = np.concatenate([a["deltas"], np.ones((len(a["deltas"]), extra, 3))], axis=1)  # parts move
+    np.savez(tmp_path / "parts.npz", neutral=full.vertices, faces=full.faces, names=a["names"],
+             deltas=deltas)
+    rig = load_user_rig(tmp_path / "parts.npz")
+    face = face_rig(rig)
+    assert "fine-tuning on the face alone (3,386 of 3,478 vertices" in capsys.readouterr().out
+    assert np.array_equal(face.neutral, rig.neutral[:n]) and np.array_equal(face.faces, a["faces"])
+    assert np.array_equal(face.deltas, rig.deltas[:, :n])
+    assert face_rig(face) is face                                 # one part: left as it is
