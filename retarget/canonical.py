@@ -41,6 +41,8 @@ GRID_CELLS = 96           # height-field cells along the head window's depth
 SAMPLE_SPACING = 0.5      # spacing of the triangle samples, in height-field cells
 FRONT_COS = 0.5           # the face front: surface normals within 60° of +z (cos 60° = 0.5) ...
 JUMP_CELLS = 4.0          # ... and no step in the height field above 4 cells between neighbours
+NOSE_RADIUS = 0.03        # a nose tip given to fit_face_frame: searched this fraction of the window
+                          # depth around it
 SEED_RADIUS = 0.1         # components of the face front reaching this fraction of the window
                           # depth around the nose tip make the face (the nose alone may be cut off)
 SLICE_BANDS = 64          # horizontal slices of the mesh's height for finding the shoulders
@@ -291,7 +293,8 @@ def face_front(height: np.ndarray, front_nz: np.ndarray, cell: float) -> np.ndar
     return np.where(front, labels, -1)
 
 
-def fit_face_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
+def fit_face_frame(vertices: np.ndarray, faces: np.ndarray,
+                   nose: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """The face's reference point and width, from the front of the face.
 
     1. The head window (:func:`head_window_depth`): the top of the mesh down to about one head width;
@@ -306,7 +309,10 @@ def fit_face_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
        bust whose chin runs into the neck without a silhouette, the front stops at the shoulders
        (:func:`shoulder_depth`).
 
-    vertices (V,3) float64 (+y up, +z forward, any units), faces (F,3) int.
+    vertices (V,3) float64 (+y up, +z forward, any units), faces (F,3) int. nose: (2,) the x, y of
+    the nose tip when it is known: the tip is then the front-most point within ``NOSE_RADIUS``
+    of the window's depth from it (a head whose lips, chin or brow lie further forward than its
+    nose; docs/RESULTS.md, "The face frame's nose tip").
     Returns (point (3,): the front's mid x, the nose tip's y and z; the front's width), input units.
     """
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
@@ -325,7 +331,13 @@ def fit_face_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     height, front_nz = front_height_field(*surface_samples(vertices, faces[near],
                                                            SAMPLE_SPACING * cell), lo, cell, shape)
     rows_y = lo[1] + (np.arange(shape[1]) + 0.5) * cell
-    seed = np.unravel_index(np.argmax(np.where(rows_y >= top - d, height, -np.inf)), shape)
+    front = np.where(rows_y >= top - d, height, -np.inf)
+    if nose is not None:
+        cols_x = lo[0] + (np.arange(shape[0]) + 0.5) * cell
+        around = np.hypot(*np.meshgrid(cols_x - nose[0], rows_y - nose[1], indexing="ij")) <= NOSE_RADIUS * d
+        if np.isfinite(height[around]).any():
+            front = np.where(around, height, -np.inf)
+    seed = np.unravel_index(np.argmax(front), shape)
     labels = face_front(height, front_nz, cell)
     labels[:, rows_y < top - shoulders] = -1                     # nothing below a bust's shoulders
     gi, gj = np.ogrid[:shape[0], :shape[1]]

@@ -274,3 +274,20 @@ def test_a_rolled_head_is_turned_back():
     roll = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
     rotation = upright_rotation(v @ roll.T, f)                   # roll is a sideways turn
     assert rotation is not None and rotation_angle(rotation @ roll) < 1.0
+
+
+def test_a_given_nose_tip_is_taken_where_the_lips_lie_further_forward():
+    """The face frame takes the front-most point for the nose tip; on a head whose lips stick out
+    past its nose that is the lips, unless the nose tip is given (fit_face_frame(nose=))."""
+    from retarget.canonical import fit_face_frame
+
+    from .test_api import head_mesh
+
+    head = head_mesh(4)                                        # its nose bump at (0, 0), 3 cm
+    v = head.vertices.copy()
+    front = v[:, 2] > 0
+    v[:, 2] += 4.0 * np.exp(-(v[:, 0] ** 2 / 6.0 + (v[:, 1] + 5.0) ** 2 / 1.0)) * front  # lips
+    point, width = fit_face_frame(v, head.faces)
+    assert abs(point[1] + 5.0) < 0.5                           # taken at the lips
+    point, same = fit_face_frame(v, head.faces, nose=np.array([0.0, 0.0]))
+    assert abs(point[1]) < 0.5 and point[2] > 11.0 and same == width
