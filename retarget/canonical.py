@@ -43,6 +43,14 @@ FRONT_COS = 0.5           # the face front: surface normals within 60° of +z (c
 JUMP_CELLS = 4.0          # ... and no step in the height field above 4 cells between neighbours
 NOSE_RADIUS = 0.03        # a nose tip given to fit_face_frame: searched this fraction of the window
                           # depth around it
+NOSE_CANDIDATES = 12      # the nose finder (nose_candidates): peaks of the front read, at most,
+NOSE_SPACING = 0.03       # ... this many window depths apart,
+NOSE_DEPTH = 0.12         # ... at most this many behind the front-most point;
+NOSE_PATCH = 9            # its features: the height field on a 9 x 9 grid
+NOSE_SPAN = 0.15          # ... +-0.15 window depths around each peak,
+NOSE_CLIP = 0.3           # ... relative heights clipped at -0.3 window depths
+NOSE_MARGIN = 0.3         # another peak is the nose when the finder rates it this much above the
+                          # front-most point (probabilities)
 SEED_RADIUS = 0.1         # components of the face front reaching this fraction of the window
                           # depth around the nose tip make the face (the nose alone may be cut off)
 SLICE_BANDS = 64          # horizontal slices of the mesh's height for finding the shoulders
@@ -293,28 +301,38 @@ def face_front(height: np.ndarray, front_nz: np.ndarray, cell: float) -> np.ndar
     return np.where(front, labels, -1)
 
 
-def fit_face_frame(vertices: np.ndarray, faces: np.ndarray,
-                   nose: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """The face's reference point and width, from the front of the face.
+@dataclass
+class FaceField:
+    """The front of a head seen along −z (:func:`face_field`): height (H,W) max z of the surface
+    per cell (−inf where empty) and front_nz (H,W) its |n_z|, on cells of side ``cell`` from
+    ``lo`` (2,) (cell (i, j) covers x = lo[0] + i·cell, y = lo[1] + j·cell); rows_y (W,) the cells'
+    y; top the mesh's max y; depth the head window's depth (:func:`head_window_depth`); shoulders
+    a bust's :func:`shoulder_depth` (inf if none). Input units."""
 
-    1. The head window (:func:`head_window_depth`): the top of the mesh down to about one head width;
-       the nose tip is its front-most point (a bust's chest, as far forward, is below it).
-    2. The height field of the front surface around the tip (:func:`front_height_field`; triangles
-       sampled densely, so any tessellation gives the same field and hidden parts, such as eye
-       sockets and a mouth cavity, do not count).
-    3. The face front (:func:`face_front`): the forward-facing surface connected to the nose tip
-       without crossing a silhouette; it ends where the cheeks and temples turn sideways, under the
-       chin and up the forehead, so the neck, the ears and a bust's chest are not part of it, and a
-       face mask that keeps the cheeks has all of it. Its width (x extent) is the face's size. On a
-       bust whose chin runs into the neck without a silhouette, the front stops at the shoulders
-       (:func:`shoulder_depth`).
+    height: np.ndarray
+    front_nz: np.ndarray
+    lo: np.ndarray
+    cell: float
+    rows_y: np.ndarray
+    top: float
+    depth: float
+    shoulders: float
 
-    vertices (V,3) float64 (+y up, +z forward, any units), faces (F,3) int. nose: (2,) the x, y of
-    the nose tip when it is known: the tip is then the front-most point within ``NOSE_RADIUS``
-    of the window's depth from it (a head whose lips, chin or brow lie further forward than its
-    nose; docs/RESULTS.md, "The face frame's nose tip").
-    Returns (point (3,): the front's mid x, the nose tip's y and z; the front's width), input units.
-    """
+    def cell_xy(self, cells: np.ndarray) -> np.ndarray:
+        """(K,2) int cells -> (K,2) their centres' x, y."""
+        return self.lo + (np.asarray(cells) + 0.5) * self.cell
+
+    def front_most(self) -> tuple[int, int]:
+        """The front-most cell of the head window (the nose tip, on most heads)."""
+        window = np.where(self.rows_y >= self.top - self.depth, self.height, -np.inf)
+        return np.unravel_index(np.argmax(window), self.height.shape)
+
+
+def face_field(vertices: np.ndarray, faces: np.ndarray) -> FaceField:
+    """The height field of a head's front around its front-most point (:class:`FaceField`): the
+    head window (:func:`head_window_depth`, above a bust's shoulders), its front-most vertex, and
+    the triangles near it sampled densely (:func:`front_height_field`) on ``GRID_CELLS`` cells
+    per window depth, 0.8 window depths each way. vertices (V,3) float64, faces (F,3) int."""
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     shoulders = shoulder_depth(vertices, faces)
     d = head_window_depth(vertices, shoulders)
@@ -331,15 +349,107 @@ def fit_face_frame(vertices: np.ndarray, faces: np.ndarray,
     height, front_nz = front_height_field(*surface_samples(vertices, faces[near],
                                                            SAMPLE_SPACING * cell), lo, cell, shape)
     rows_y = lo[1] + (np.arange(shape[1]) + 0.5) * cell
-    front = np.where(rows_y >= top - d, height, -np.inf)
+    return FaceField(height, front_nz, lo, cell, rows_y, float(top), float(d), float(shoulders))
+
+
+def nose_candidates(field: FaceField) -> tuple[np.ndarray, np.ndarray]:
+    """Where the nose tip may be, and what the nose finder reads there: the front-most cell of the
+    head window first, then up to ``NOSE_CANDIDATES`` − 1 more peaks of the height field (greedy,
+    each the highest forward-facing cell at least ``NOSE_SPACING`` window depths from those before,
+    at most ``NOSE_DEPTH`` behind the first, inside or below the window). Returns (cells (K,2)
+    int, features (K, NOSE_PATCH² + 3) float32: the height field on a NOSE_PATCH × NOSE_PATCH grid
+    ±``NOSE_SPAN`` window depths around the cell relative to the cell's own height, the cell's
+    height below the first and its depth below the mesh's top, all in window depths and clipped
+    at −``NOSE_CLIP``, and 1 for the first candidate)."""
+    d, cell, h = field.depth, field.cell, field.height
+    first = field.front_most()
+    free = np.where((field.front_nz > FRONT_COS) & (h >= h[first] - NOSE_DEPTH * d), h, -np.inf)
+    gi, gj = np.ogrid[:h.shape[0], :h.shape[1]]
+    cells = [first]
+    while True:
+        c = cells[-1]
+        free[(gi - c[0]) ** 2 + (gj - c[1]) ** 2 <= (NOSE_SPACING * d / cell) ** 2] = -np.inf
+        if len(cells) == NOSE_CANDIDATES or not np.isfinite(free).any():
+            break
+        cells.append(np.unravel_index(np.argmax(free), h.shape))
+    cells = np.array(cells)
+    offsets = np.linspace(-NOSE_SPAN, NOSE_SPAN, NOSE_PATCH) * d / cell
+    features = []
+    for k, (i, j) in enumerate(cells):
+        ii = np.clip(np.round(i + offsets).astype(int), 0, h.shape[0] - 1)
+        jj = np.clip(np.round(j + offsets).astype(int), 0, h.shape[1] - 1)
+        patch = np.maximum((h[np.ix_(ii, jj)] - h[i, j]) / d, -NOSE_CLIP)   # −inf (empty) clipped
+        features.append(np.r_[patch.ravel(), max((h[i, j] - h[first]) / d, -NOSE_CLIP),
+                              (field.top - field.rows_y[j]) / d, float(k == 0)])
+    return cells, np.asarray(features, np.float32)
+
+
+NOSE_FINDER_PATH = (Path(__file__).resolve().parents[1] / "data_synth" / "makehuman" / "data"
+                    / "nose_finder.npz")
+
+
+@lru_cache(maxsize=1)
+def nose_finder() -> tuple[np.ndarray, ...]:
+    """The shipped nose finder (``NOSE_FINDER_PATH``): a one-hidden-layer scorer of
+    :func:`nose_candidates`' features, (w1 (F,H), b1 (H,), w2 (H,), b2 ()) float64, trained on
+    MakeHuman training heads whose nose tips are known (docs/results/face_frame/nose_finder.py)."""
+    try:
+        with np.load(NOSE_FINDER_PATH, allow_pickle=False) as z:
+            return tuple(z[k].astype(np.float64) for k in ("w1", "b1", "w2", "b2"))
+    except (OSError, KeyError, ValueError) as e:
+        raise RetargetError(f"{NOSE_FINDER_PATH}: the packaged nose finder is missing or "
+                            f"unreadable ({e}); reinstall the package") from None
+
+
+def nose_probabilities(features: np.ndarray) -> np.ndarray:
+    """The nose finder's probability (K,) that each candidate (features (K,F)) is the nose tip."""
+    w1, b1, w2, b2 = nose_finder()
+    score = np.tanh(features @ w1 + b1) @ w2 + b2
+    p = np.exp(score - score.max())
+    return p / p.sum()
+
+
+def fit_face_frame(vertices: np.ndarray, faces: np.ndarray,
+                   nose: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """The face's reference point and width, from the front of the face.
+
+    1. The height field of the head's front (:func:`face_field`; triangles sampled densely, so any
+       tessellation gives the same field and hidden parts, such as eye sockets and a mouth cavity,
+       do not count).
+    2. The nose tip: the front-most point of the head window (the top of the mesh down to about
+       one head width, :func:`head_window_depth`; a bust's chest, as far forward, is below it),
+       unless the nose finder (:func:`nose_candidates`, :func:`nose_probabilities`) puts another
+       peak ahead of it by ``NOSE_MARGIN`` in probability: on a head whose lips, chin or brow lie
+       further forward than its nose, or whose nose lies below the window.
+    3. The face front (:func:`face_front`): the forward-facing surface connected to the nose tip
+       without crossing a silhouette; it ends where the cheeks and temples turn sideways, under the
+       chin and up the forehead, so the neck, the ears and a bust's chest are not part of it, and a
+       face mask that keeps the cheeks has all of it. Its width (x extent) is the face's size. On a
+       bust whose chin runs into the neck without a silhouette, the front stops at the shoulders
+       (:func:`shoulder_depth`).
+
+    vertices (V,3) float64 (+y up, +z forward, any units), faces (F,3) int. nose: (2,) the x, y of
+    the nose tip when it is known: the tip is then the front-most point within ``NOSE_RADIUS``
+    of the window's depth from it (docs/RESULTS.md, "The face frame's nose tip").
+    Returns (point (3,): the front's mid x, the nose tip's y and z; the front's width), input units.
+    """
+    field = face_field(vertices, faces)
+    h, d, cell = field.height, field.depth, field.cell
+    shape = h.shape
+    seed = field.front_most()
     if nose is not None:
-        cols_x = lo[0] + (np.arange(shape[0]) + 0.5) * cell
-        around = np.hypot(*np.meshgrid(cols_x - nose[0], rows_y - nose[1], indexing="ij")) <= NOSE_RADIUS * d
-        if np.isfinite(height[around]).any():
-            front = np.where(around, height, -np.inf)
-    seed = np.unravel_index(np.argmax(front), shape)
-    labels = face_front(height, front_nz, cell)
-    labels[:, rows_y < top - shoulders] = -1                     # nothing below a bust's shoulders
+        x, y = np.meshgrid(field.lo[0] + (np.arange(shape[0]) + 0.5) * cell - nose[0],
+                           field.rows_y - nose[1], indexing="ij")
+        around = np.hypot(x, y) <= NOSE_RADIUS * d
+        if np.isfinite(h[around]).any():
+            seed = np.unravel_index(np.argmax(np.where(around, h, -np.inf)), shape)
+    else:
+        cells, features = nose_candidates(field)
+        p = nose_probabilities(features)
+        if p.max() - p[0] > NOSE_MARGIN:
+            seed = tuple(cells[np.argmax(p)])
+    labels = face_front(h, field.front_nz, cell)
+    labels[:, field.rows_y < field.top - field.shoulders] = -1   # nothing below a bust's shoulders
     gi, gj = np.ogrid[:shape[0], :shape[1]]
     near_tip = (gi - seed[0]) ** 2 + (gj - seed[1]) ** 2 <= (SEED_RADIUS * d / cell) ** 2
     touching = np.unique(labels[near_tip & (labels >= 0)])
@@ -347,8 +457,8 @@ def fit_face_frame(vertices: np.ndarray, faces: np.ndarray,
         raise RetargetError("no surface faces forward around the front-most point; is the mesh "
                             "a face in the +y up, +z forward frame?")
     ii = np.nonzero(np.isin(labels, touching))[0]
-    x_mid = lo[0] + 0.5 * (ii.max() + ii.min() + 1) * cell
-    return (np.array([x_mid, lo[1] + (seed[1] + 0.5) * cell, height[seed]]),
+    x_mid = field.lo[0] + 0.5 * (ii.max() + ii.min() + 1) * cell
+    return (np.array([x_mid, field.rows_y[seed[1]], h[seed]]),
             float((ii.max() - ii.min() + 1) * cell))
 
 

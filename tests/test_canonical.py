@@ -291,3 +291,27 @@ def test_a_given_nose_tip_is_taken_where_the_lips_lie_further_forward():
     assert abs(point[1] + 5.0) < 0.5                           # taken at the lips
     point, same = fit_face_frame(v, head.faces, nose=np.array([0.0, 0.0]))
     assert abs(point[1]) < 0.5 and point[2] > 11.0 and same == width
+
+
+def test_the_nose_finder_takes_the_nose_where_the_lips_lie_further_forward(monkeypatch):
+    """Validation head 124 (head and neck, 2,000 vertices): its upper lip lies further forward than
+    its nose, so the front-most point is the lip; the shipped nose finder takes the nose."""
+    from data_synth.makehuman import assets, base_head_rig, build_head_rig, head_tessellation
+    from data_synth.makehuman import head_neutral, sample_head_identity
+    from retarget import canonical
+    from retarget.canonical import fit_face_frame, nose_finder
+
+    w1, b1, w2, b2 = nose_finder()
+    assert w1.shape == (canonical.NOSE_PATCH ** 2 + 3, len(b1)) and w2.shape == b1.shape and b2.shape == ()
+    ident = sample_head_identity(124, "val")
+    rig = build_head_rig(base_head_rig(ident, "arkit"), head_tessellation(
+        seed=124, n_vertices=2000, kind="decimated", crop="head_neck"), 6)
+    base = assets.heads()["full_neutral"]
+    midline = np.flatnonzero((np.abs(base[:, 0]) < 0.3) & (np.abs(base[:, 1] - 69.09) < 1.5))
+    tip = head_neutral(ident, "bust")[midline[np.argmax(base[midline, 2])]]
+    v = rig.neutral.astype(np.float64)
+    point, width = fit_face_frame(v, rig.faces)
+    assert np.hypot(*(point[:2] - tip[:2])) < 0.05 * width              # 0.02 face widths
+    monkeypatch.setattr(canonical, "NOSE_MARGIN", 2.0)                   # the finder off
+    point, width = fit_face_frame(v, rig.faces)
+    assert np.hypot(*(point[:2] - tip[:2])) > 0.1 * width               # 0.13: the upper lip

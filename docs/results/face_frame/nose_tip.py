@@ -64,10 +64,11 @@ def measure(seeds, oracle: bool) -> list[dict]:
     return rows
 
 
-def summary(fitted: list[dict], oracle: list[dict]) -> None:
+def summary(fitted: list[dict], oracle: list[dict], names=("frame as fitted", "true nose tip")) -> None:
+    """Tables of two runs' files (``names``: what each run's frame was)."""
     o = {r["seed"]: r for r in oracle}
-    print("| heads | count | frame's tip > 0.05 face widths off | weight MAE: frame as fitted | "
-          "true nose tip | predicting 0 | rig error (median): as fitted / true tip |")
+    print(f"| heads | count | frame's tip > 0.05 face widths off (first) | weight MAE: {names[0]} | "
+          f"{names[1]} | predicting 0 | rig error (median): {names[0]} / {names[1]} |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for name, keep in (("regular", False), ("stylised", True), ("all", None)):
         sel = [r for r in fitted if keep is None or r["stylised"] == keep]
@@ -78,7 +79,8 @@ def summary(fitted: list[dict], oracle: list[dict]) -> None:
               f"{np.median([r['rig_median_rel'] for r in sel]):.3f} / "
               f"{np.median([o[r['seed']]['rig_median_rel'] for r in sel]):.3f} |")
     print()
-    print("| head | stylised | frame's tip off (face widths) | weight MAE: as fitted → true tip | rig error: as fitted → true tip |")
+    print(f"| head | stylised | frame's tip off (face widths, first) | weight MAE: {names[0]} → {names[1]} | "
+          f"rig error: {names[0]} → {names[1]} |")
     print("| ---: | --- | ---: | ---: | ---: |")
     for r in fitted:
         q = o[r["seed"]]
@@ -94,9 +96,11 @@ def main():
     ap.add_argument("--oracle", action="store_true", help="give the frame the true nose tip")
     ap.add_argument("--out", help="JSON of the per-seed figures")
     ap.add_argument("--summary", nargs=2, metavar=("FITTED", "ORACLE"))
+    ap.add_argument("--names", nargs=2, default=("frame as fitted", "true nose tip"),
+                    help="what the two summarised runs' frames were")
     args = ap.parse_args()
     if args.summary:
-        return summary(*(json.load(open(p)) for p in args.summary))
+        return summary(*(json.load(open(p)) for p in args.summary), names=args.names)
     rows = measure(range(*args.seeds), args.oracle)
     if args.out:
         with open(args.out, "w") as f:
