@@ -639,7 +639,7 @@ def upright_rotation(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray | No
     pitch P is at least ``UPRIGHT_MIN_PITCH``; else S alone when the head is turned sideways (yaw
     and roll) at least ``UPRIGHT_MIN_SIDE``; never when the face model fits it too badly to tell
     (``UPRIGHT_MAX_RMS``: procedural and many stylised heads). The thresholds lie above what
-    upright MakeHuman heads that fit read from their own shape (pitch up to 7.9°, yaw and roll up
+    upright MakeHuman heads that fit read from their own shape (pitch up to 8.4°, yaw and roll up
     to 2.7°, on 450 heads of the three splits), so heads like those the network was trained on are
     taken as they are: turning one by what its shape reads can cost more than it saves (a stylised
     test head read at 6.2° and turned: 3.3 times the inversion error). Without it a head turned
