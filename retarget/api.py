@@ -529,9 +529,13 @@ class Retargeter:
             return mesh
         mesh = as_mesh(mesh, role="target")
         face = face_part(mesh) if self.face_only else None
-        if face is not None:                    # the face alone; the other parts keep their place
-            t = self.prepare(submesh(mesh, face))
-            return Target(mesh, t.proxy, t.feat, t.c, t.codes, face)
+        if face is None:
+            return self._prepare_target(mesh)
+        t = self._prepare_target(submesh(mesh, face))   # the face alone; the other parts keep
+        return Target(mesh, t.proxy, t.feat, t.c, t.codes, face)   # their place
+
+    def _prepare_target(self, mesh: Mesh) -> Target:
+        """``prepare`` of a mesh taken whole (one part, or ``face_only`` off)."""
         check_head_like(mesh, "target")
         if mesh.n_vertices > self.proxy_vertices:
             (pv, pf), cluster = cluster_decimate(mesh.vertices, mesh.faces, self.proxy_vertices)

@@ -384,6 +384,17 @@ def nose_candidates(field: FaceField) -> tuple[np.ndarray, np.ndarray]:
     return cells, np.asarray(features, np.float32)
 
 
+def packaged_arrays(path: Path, keys: tuple[str, ...], what: str) -> tuple[np.ndarray, ...]:
+    """The arrays ``keys`` of a data file shipped with the package (npz), float64; RetargetError
+    naming the file and ``what`` it holds when it is missing or unreadable."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return tuple(z[k].astype(np.float64) for k in keys)
+    except (OSError, KeyError, ValueError) as e:
+        raise RetargetError(f"{path}: the packaged {what} is missing or unreadable ({e}); "
+                            "reinstall the package") from None
+
+
 NOSE_FINDER_PATH = (Path(__file__).resolve().parents[1] / "data_synth" / "makehuman" / "data"
                     / "nose_finder.npz")
 
@@ -393,12 +404,7 @@ def nose_finder() -> tuple[np.ndarray, ...]:
     """The shipped nose finder (``NOSE_FINDER_PATH``): a one-hidden-layer scorer of
     :func:`nose_candidates`' features, (w1 (F,H), b1 (H,), w2 (H,), b2 ()) float64, trained on
     MakeHuman training heads whose nose tips are known (docs/results/face_frame/nose_finder.py)."""
-    try:
-        with np.load(NOSE_FINDER_PATH, allow_pickle=False) as z:
-            return tuple(z[k].astype(np.float64) for k in ("w1", "b1", "w2", "b2"))
-    except (OSError, KeyError, ValueError) as e:
-        raise RetargetError(f"{NOSE_FINDER_PATH}: the packaged nose finder is missing or "
-                            f"unreadable ({e}); reinstall the package") from None
+    return packaged_arrays(NOSE_FINDER_PATH, ("w1", "b1", "w2", "b2"), "nose finder")
 
 
 def nose_probabilities(features: np.ndarray) -> np.ndarray:
@@ -528,12 +534,7 @@ def write_upright_face_model(path=UPRIGHT_MODEL_PATH) -> Path:
 def upright_face_model() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`build_upright_face_model`'s (mean (N,3), shapes (K,N,3), variances (K,)) as shipped
     (``UPRIGHT_MODEL_PATH``), float64."""
-    try:
-        with np.load(UPRIGHT_MODEL_PATH, allow_pickle=False) as z:
-            return tuple(z[k].astype(np.float64) for k in ("mean", "shapes", "variances"))
-    except (OSError, KeyError, ValueError) as e:
-        raise RetargetError(f"{UPRIGHT_MODEL_PATH}: the packaged face model is missing or "
-                            f"unreadable ({e}); reinstall the package") from None
+    return packaged_arrays(UPRIGHT_MODEL_PATH, ("mean", "shapes", "variances"), "face model")
 
 
 def axis_angle_rotation(axis: np.ndarray, angle: float) -> np.ndarray:

@@ -24,20 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-from data_synth.makehuman import assets, head_neutral
+from data_synth.makehuman import head_neutral
 from retarget import canonical
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT / "stylised"), str(ROOT / "weight_mae")]
+sys.path[:0] = [str(ROOT / "stylised"), str(ROOT / "weight_mae"), str(ROOT / "face_frame")]
 from breakdown import baked_and_true  # noqa: E402
+from nose_finder import nose_tip_vertex  # noqa: E402
 from rig_by_style import head_case  # noqa: E402
-
-
-def nose_tip_vertex() -> int:
-    """The base head's nose tip: its front-most vertex near the midline at the nose's height."""
-    base = assets.heads()["full_neutral"]
-    near = np.flatnonzero((np.abs(base[:, 0]) < 0.3) & (np.abs(base[:, 1] - 69.09) < 1.5))
-    return int(near[np.argmax(base[near, 2])])
 
 
 def measure(seeds, oracle: bool) -> list[dict]:
