@@ -36,9 +36,10 @@ r = Retargeter.load(None)
 src = [Mesh(x, f) for x in frames]
 base_t = r.transfer(src, Mesh(v, f), source_neutral=Mesh(v, f), refine=True)
 def mse(pred, idx): return float((((pred - frames[:, idx]) * 10) ** 2).sum(-1).mean())
-print("unsplit: self (neutral+refine) %.3f, no neutral %.3f" % (mse(base_t, np.arange(len(v))), mse(r.transfer(src, Mesh(v, f)), np.arange(len(v)))))
+whole = np.arange(len(v))
+print("unsplit: do nothing %.3f, self (neutral+refine) %.3f, no neutral %.3f" % (mse(np.broadcast_to(v, frames.shape), whole), mse(base_t, whole), mse(r.transfer(src, Mesh(v, f)), whole)))
 inv0 = r.invert(src, source_neutral=Mesh(v, f), refine=True)
-print("unsplit invert MAE %.4f" % np.abs(ict_to_arkit_weights(inv0, m) - a)[:, m.sum(1) > 0].mean())
+print("unsplit invert MAE %.4f (predicting 0: %.4f)" % (np.abs(ict_to_arkit_weights(inv0, m) - a)[:, m.sum(1) > 0].mean(), np.abs(a)[:, m.sum(1) > 0].mean()))
 for name, side in cuts.items():
     idx, f2 = (None, None)
     if name == "back + ears":
@@ -54,4 +55,4 @@ for name, side in cuts.items():
     t0 = r.transfer(sf, tgt)
     inv = r.invert(sf, source_neutral=tgt, refine=True)
     gap = float(np.abs(t[:, len(v):] - t[:, idx[len(v):]]).max()) * 10 if len(idx) > len(v) else 0
-    print("%-12s +%d vertices: self (neutral+refine) %.3f, no neutral %.3f, invert MAE %.4f, seam gap up to %.2f mm" % (name, len(idx) - len(v), mse(t, idx), mse(t0, idx), np.abs(ict_to_arkit_weights(inv, m) - a)[:, m.sum(1) > 0].mean(), gap), flush=True)
+    print("%-12s +%d vertices: do nothing %.3f, self (neutral+refine) %.3f, no neutral %.3f, invert MAE %.4f, seam gap up to %.2f mm" % (name, len(idx) - len(v), mse(np.broadcast_to(v2, (len(frames),) + v2.shape), idx), mse(t, idx), mse(t0, idx), np.abs(ict_to_arkit_weights(inv, m) - a)[:, m.sum(1) > 0].mean(), gap), flush=True)
