@@ -52,9 +52,12 @@ only on the eval config:
   (``ratios`` of each suite; jitter has none, doing nothing does not move);
 - ``closest point``: each target vertex takes the displacement of the nearest source vertex once
   both neutrals are canonicalised in the face frame (``retarget.oracle.closest_point_transfer``).
-  Every suite gives it the source rig's neutral, as the network gets it (``source_neutral``); it
-  has no inverse-rigging or weight-driven (animate) numbers. It is exact on self-retargeting (one
-  mesh) by construction, and the peer to beat across identities and topologies;
+  Every suite gives it the source rig's neutral, as the network gets it (``source_neutral``). It
+  is exact on self-retargeting (one mesh) by construction, and the peer to beat across identities
+  and topologies. Inverse rigging and driving from FACS weights need a rig: there it is the
+  packaged MakeHuman ARKit rig carried onto the mesh by closest point, driven by the weights or
+  fitted to each frame by bounded least squares (what an artist with an ARKit head tries first;
+  on the real rig, which is that template, it is exact);
 - ``oracle (u,v)``: displacement transfer through the known (u, v) correspondence
   (``retarget.oracle``), which needs (u, v) on both meshes and so has no real-rig, inverse-rigging
   or animate numbers.
@@ -73,6 +76,7 @@ import numpy as np
 
 from data_synth.facs import FACS_NAMES, N_FACS, arkit_to_ict
 from data_synth.identity import sample_identity
+from data_synth.makehuman.assets import DATA_DIR
 from data_synth.rig import build_rig
 from data_synth.sampling import sample_weights, smooth_sequence
 from data_synth.tessellate import tessellate
@@ -84,7 +88,8 @@ from .io import regular_file
 from .mesh import Mesh
 from .metrics import (second_difference_jitter_mm, segment_mse_mm2, squared_errors_mm2, standard_error,
                       weight_mae)
-from .oracle import closest_point_transfer, displacement_transfer, uv_transfer_matrix
+from .oracle import (closest_point_rig, closest_point_transfer, displacement_transfer, fit_rig_weights,
+                     uv_transfer_matrix)
 from .smoothing import FILTERS, smooth_codes
 
 #: Suite names; a suite's index seeds its weights, so new suites go at the end.
@@ -99,6 +104,9 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 ORACLE_NAME = "oracle (u,v)"
 DO_NOTHING_NAME = "do nothing"
 CLOSEST_POINT_NAME = "closest point"
+#: The template rig of the closest-point baseline's weight-driven suites: the packaged MakeHuman
+#: ARKit rig (MIT; data_synth/makehuman/data/LICENSES.md).
+TEMPLATE_RIG = DATA_DIR / "makehuman_arkit.npz"
 #: Rows that depend only on the eval config, in table order around the checkpoints' rows.
 BASELINES_FIRST, BASELINES_LAST = (DO_NOTHING_NAME,), (CLOSEST_POINT_NAME, ORACLE_NAME)
 #: How a checkpoint is given the source (``retarget eval --neutral-modes``): without its neutral
@@ -242,6 +250,16 @@ class RealRig:
         """neutral + weights·deltas: (K,) -> (V,3) or (T,K) -> (T,V,3), float32 cm."""
         return self.neutral + np.tensordot(np.asarray(weights, np.float32), self.deltas,
                                            axes=(-1, 0))
+
+
+def template_rig(rig: RealRig | None = None) -> tuple[RealRig, np.ndarray]:
+    """The closest-point baseline's template rig: ``rig`` (default the packaged MakeHuman ARKit rig,
+    ``TEMPLATE_RIG``) with its ARKit shapes that have an ICT counterpart (all but tongueOut), and
+    their (K, 53) ARKit → ICT matrix (``arkit_ict_matrix``)."""
+    rig = rig or RealRig.load(TEMPLATE_RIG, hint="the package's data is missing")
+    keep = [k for k, n in enumerate(rig.names) if arkit_to_ict(n)]
+    rig = RealRig(rig.neutral, rig.deltas[keep], rig.faces, tuple(rig.names[k] for k in keep))
+    return rig, arkit_ict_matrix(rig.names)
 
 
 @dataclass(eq=False)
@@ -484,20 +502,47 @@ class DoNothingMethod:
 
 class ClosestPointMethod:
     """Closest-point displacement transfer in the face frame (``retarget.oracle``), given the
-    source rig's neutral."""
+    source rig's neutral. Driving from FACS weights and inverse rigging start from a rig, so there
+    it is the template's: the packaged MakeHuman ARKit rig (``TEMPLATE_RIG``, its shapes with an
+    ICT counterpart) carried onto the mesh's neutral by closest point
+    (``retarget.oracle.closest_point_rig``), driven by the ICT weights mapped to ARKit ones
+    (``ict_to_arkit_weights``), or fitted to each frame by bounded least squares
+    (``retarget.oracle.fit_rig_weights``) and mapped back to ICT weights."""
 
     name = CLOSEST_POINT_NAME
+
+    def __init__(self, template: RealRig | None = None):
+        self._template = template
+        self._rigs: dict = {}           # id(rig) -> (rig, its template shapes (K,V,3) cm)
 
     def transfer(self, case: Case, filters=(None,), fps: float = 30.0) -> dict:
         return {None: closest_point_transfer(case.source.neutral, case.source.faces,
                                              case.source_frames, case.target.neutral,
                                              case.target.faces, frame="face")}
 
-    def animate(self, case: Case, weights: np.ndarray | None = None):
-        return None
+    @cached_property
+    def template(self) -> tuple[RealRig, np.ndarray]:
+        """``template_rig`` of the rig given, by default the packaged one."""
+        return template_rig(self._template)
 
-    def invert(self, case: Case):
-        return None
+    def _shapes(self, rig) -> np.ndarray:
+        if id(rig) not in self._rigs:
+            t = self.template[0]
+            self._rigs[id(rig)] = (rig, closest_point_rig(t.neutral, t.faces, t.deltas, rig.neutral,
+                                                          rig.faces))
+        return self._rigs[id(rig)][1]
+
+    def animate(self, case: Case, weights: np.ndarray | None = None) -> np.ndarray:
+        """(T,Vt,3) cm: the target's template rig driven by (T,53) ICT ``weights`` (default the
+        case's target weights)."""
+        w = case.target_weights if weights is None else weights
+        a = ict_to_arkit_weights(w, self.template[1])
+        return case.target.neutral + np.tensordot(a, self._shapes(case.target), axes=(-1, 0))
+
+    def invert(self, case: Case) -> np.ndarray:
+        """(T,53) ICT weights in [0,1] fitted to the source frames on the source's template rig."""
+        a = fit_rig_weights(self._shapes(case.source), case.source.neutral, case.source_frames)
+        return np.clip(a @ self.template[1], 0.0, 1.0).astype(np.float32)
 
 
 class OracleMethod:

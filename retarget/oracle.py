@@ -1,7 +1,10 @@
 """The classical baselines of ``retarget eval``.
 
 :func:`closest_point_transfer` is the peer to beat: each target vertex takes the displacement of
-the nearest source vertex once both heads are canonicalised, with no correspondence given.
+the nearest source vertex once both heads are canonicalised, with no correspondence given. For the
+jobs that start from weights (driving a mesh from FACS weights, inverse rigging) its peer is a
+template rig carried onto the mesh the same way (:func:`closest_point_rig`) and, for inverse
+rigging, weights fitted to each frame on it by bounded least squares (:func:`fit_rig_weights`).
 
 The rest of this module is the oracle: displacement transfer through a known (u, v)
 correspondence (Noh & Neumann 2001 style, with the correspondence given instead of fitted).
@@ -135,3 +138,49 @@ def closest_point_transfer(src_neutral: np.ndarray, src_faces: np.ndarray, src_f
     disp = (frames - np.asarray(src_neutral, np.float64))[..., nearest, :]
     return np.asarray(tgt_neutral, np.float64) + tgt_canon.displacement_from_canonical(
         src_canon.displacement_to_canonical(disp))
+
+
+def closest_point_rig(template_neutral: np.ndarray, template_faces: np.ndarray,
+                      template_deltas: np.ndarray, tgt_neutral: np.ndarray, tgt_faces: np.ndarray,
+                      frame: str = "face") -> np.ndarray:
+    """A template blendshape rig carried onto a target neutral by :func:`closest_point_transfer`
+    (each shape taken as a frame): what a technical artist with an ARKit head tries first to rig
+    another head.
+
+    template_neutral (Vs,3), template_faces (Fs,3), template_deltas (K,Vs,3) in the template's
+    units; tgt_neutral (Vt,3), tgt_faces (Ft,3) in the target's. Returns the target's shapes
+    (K,Vt,3) float64, in the target's units."""
+    neutral = np.asarray(template_neutral, np.float64)
+    frames = neutral + np.asarray(template_deltas, np.float64)
+    return closest_point_transfer(neutral, template_faces, frames, tgt_neutral, tgt_faces,
+                                  frame=frame) - np.asarray(tgt_neutral, np.float64)
+
+
+def fit_rig_weights(deltas: np.ndarray, neutral: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """Inverse rigging on a known rig, the plain way: the weights w in [0,1] minimising
+    |neutral + Σ_k w_k deltas_k − frame|² for each frame, by bounded least squares
+    (``scipy.optimize.lsq_linear``, BVLS) on the K×K reduced system, with a ridge of 1e-9 of the
+    Gram matrix's mean diagonal only to keep it positive definite.
+
+    deltas (K,V,3), neutral (V,3), frames (T,V,3) or (V,3), one unit. Returns (T,K) or (K,) float64."""
+    from scipy.linalg import cho_factor, cho_solve, solve_triangular
+    from scipy.optimize import lsq_linear
+
+    a = np.asarray(deltas, np.float64).reshape(len(deltas), -1)              # (K, 3V)
+    frames = np.asarray(frames, np.float64)
+    single = frames.ndim == 2
+    b = (frames.reshape(-1, *np.shape(neutral)) - np.asarray(neutral, np.float64)).reshape(
+        -1, a.shape[1])                                                       # (T, 3V)
+    gram = a @ a.T
+    gram += 1e-9 * np.trace(gram) / len(gram) * np.eye(len(gram))
+    factor = cho_factor(gram, lower=False)
+    chol = np.triu(factor[0])
+    out = []
+    for h in b @ a.T:
+        w = cho_solve(factor, h)
+        if w.min() < 0 or w.max() > 1:
+            w = lsq_linear(chol, solve_triangular(chol, h, trans="T"), bounds=(0, 1),
+                           method="bvls").x
+        out.append(np.clip(w, 0.0, 1.0))
+    out = np.array(out)
+    return out[0] if single else out

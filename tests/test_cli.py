@@ -2,6 +2,7 @@
 files they write agree with the Python API, every output format round-trips, GLB structure, axes
 and units; --help shows an example; one real subprocess checks the exit codes."""
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -189,8 +190,15 @@ def test_millimetre_files_give_the_centimetre_result_times_ten(files, tmp_path):
 
 def test_demo_runs_on_a_tiny_checkpoint(files, tmp_path, capsys):
     pytest.importorskip("data_synth.rig")
-    assert run("demo", "-o", tmp_path / "demo", "--frames", "2", files=files) == 0
-    assert "without the source's neutral, estimated from the take" in capsys.readouterr().out
+    assert run("demo", "-o", tmp_path / "demo", "--frames", "4", files=files) == 0
+    out = capsys.readouterr().out
+    assert "without the source's neutral, estimated from the take" in out
+    # beside the model: doing nothing and closest point, for the transfer and for the weights
+    cp = re.search(r"closest-point displacement transfer: MSE ([0-9.]+) mm", out)
+    nothing = re.search(r"doing nothing \(target left neutral\): MSE ([0-9.]+) mm", out)
+    assert cp and nothing and 0 < float(cp.group(1)) < float(nothing.group(1))
+    assert re.search(r"predicting 0: [0-9.]+; the ARKit template rig carried over by closest point "
+                     r"and fitted: 0\.[0-9]{3}\)", out)
     produced = {p.suffix for p in (tmp_path / "demo").rglob("*") if p.is_file()}
     assert {".obj", ".glb", ".png"} <= produced
 

@@ -19,7 +19,8 @@ from retarget.evaluate import (SUITES, TRANSFER_SUITES, ClosestPointMethod, DoNo
                                parse_checkpoints, summarise, to_markdown)
 from retarget.metrics import (mse_mm2, second_difference_jitter_mm, segment_mse_mm2, standard_error,
                              weight_mae)
-from retarget.oracle import closest_point_transfer, displacement_transfer, locate, uv_transfer_matrix
+from retarget.oracle import (closest_point_rig, closest_point_transfer, displacement_transfer, fit_rig_weights,
+                            locate, uv_transfer_matrix)
 from retarget.train import CHECKPOINT_FORMAT, save_checkpoint
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -131,6 +132,39 @@ def test_closest_point_transfer_converts_units_and_beats_nothing_across_topologi
     assert np.allclose(same, a.evaluate(w)[0], atol=1e-6)
 
 
+def test_closest_point_rig_copies_a_rig_onto_itself_and_converts_units():
+    z = sample_identity(0, split="test")
+    a = build_rig(z, tessellate(900, "regular", seed=0))
+    same = closest_point_rig(a.neutral, a.faces, a.deltas[:5], a.neutral, a.faces)
+    assert same.shape == (5, len(a.neutral), 3)
+    assert np.allclose(same, a.deltas[:5], atol=1e-6)
+    b = build_rig(z, tessellate(1500, "jittered", seed=1))
+    cm = closest_point_rig(a.neutral, a.faces, a.deltas[:5], b.neutral, b.faces)
+    mm = closest_point_rig(a.neutral, a.faces, a.deltas[:5], b.neutral * 10 + 5.0, b.faces)
+    assert np.allclose(mm, cm * 10, atol=1e-5)      # displacements in the target's units
+    # the same identity on another tessellation: closer to its own shapes than no shapes
+    assert np.square(cm - b.deltas[:5]).sum() < 0.5 * np.square(b.deltas[:5]).sum()
+
+
+def test_fit_rig_weights_recovers_weights_and_keeps_them_in_bounds():
+    rng = np.random.default_rng(0)
+    deltas = rng.normal(size=(6, 40, 3))
+    neutral = rng.normal(size=(40, 3))
+    w = rng.uniform(0, 1, (4, 6))
+    frames = neutral + np.tensordot(w, deltas, axes=(1, 0))
+    assert np.allclose(fit_rig_weights(deltas, neutral, frames), w, atol=1e-6)
+    one = fit_rig_weights(deltas, neutral, frames[0])
+    assert one.shape == (6,) and np.allclose(one, w[0], atol=1e-6)
+    # a frame that needs weights outside [0, 1]: the bounded minimiser, not the clipped free one
+    far = neutral + 2.0 * deltas[0] - 0.5 * deltas[1]
+    got = fit_rig_weights(deltas, neutral, far)
+    assert got.min() >= 0 and got.max() <= 1 and got[0] == pytest.approx(1.0)
+    from scipy.optimize import lsq_linear
+    a = deltas.reshape(6, -1).T
+    ref = lsq_linear(a, (far - neutral).ravel(), bounds=(0, 1)).x
+    assert np.allclose(got, ref, atol=1e-6)
+
+
 def test_oracle_locates_and_falls_back_to_nearest():
     uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
     faces = np.array([[0, 1, 2], [1, 3, 2]])
@@ -177,7 +211,18 @@ def test_suites_score_ground_truth_zero_and_a_known_offset():
     assert inv_nothing["weight_mae"] == pytest.approx(np.mean([c.source_weights.mean() for c in inv_cases]))
     per_identity = [c.source_weights.mean() for c in inv_cases]      # predicting 0: each case's MAE
     assert inv_nothing["weight_mae_se"] == pytest.approx(np.std(per_identity, ddof=1) / np.sqrt(len(inv_cases)))
-    assert "closest point" not in res["inverse"]["methods"]
+    # closest point drives and inverts with the template ARKit rig carried onto each head
+    cp_inv = res["inverse"]["methods"]["closest point"]
+    assert 0 < cp_inv["mse_mm2"] < inv_nothing["mse_mm2"] and 0 < cp_inv["weight_mae"] < 1
+    assert res["animate"]["methods"]["closest point"]["mse_mm2"] > 0
+    case = EvalData(cfg).cases("self")[0]
+    template, arkit_ict = ClosestPointMethod().template
+    assert "tongueOut" not in template.names and arkit_ict.shape == (len(template.names), 53)
+    shapes = closest_point_rig(template.neutral, template.faces, template.deltas, case.target.neutral,
+                               case.target.faces)
+    a = ict_to_arkit_weights(case.target_weights, arkit_ict)
+    assert np.allclose(ClosestPointMethod().animate(case),
+                       case.target.neutral + np.tensordot(a, shapes, axes=(1, 0)), atol=1e-5)
     assert res["jitter"]["methods"]["do nothing"]["raw"]["jitter_mm"] == 0.0
     gt = res["self"]["methods"]["gt+offset"]
     assert gt["mse_mm2"] == pytest.approx(expected) and gt["seg_mse_mm2"] == pytest.approx(expected)
@@ -222,7 +267,7 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     assert "bust->head" in res["suites"]["head_cross_crop"]["methods"]["full"]["pairs"]
     assert len(res["suites"]["head_self"]["methods"]["full"]["per_segment_mm2"]) == 20
     assert res["suites"]["self"]["methods"]["full"]["mse_mm2"] > 0
-    assert set(res["suites"]["animate"]["methods"]) == {"full", "noskin", "do nothing"}
+    assert set(res["suites"]["animate"]["methods"]) == {"full", "noskin", "do nothing", "closest point"}
     assert res["suites"]["animate"]["methods"]["full"]["mse_mm2"] > 0
     assert len(res["suites"]["self"]["methods"]["full"]["per_segment_mm2"]) == 20
     real = res["suites"]["real_rig"]["methods"]["full"]
@@ -236,7 +281,10 @@ def test_every_suite_on_a_tiny_checkpoint(tmp_path):
     real_methods = res["suites"]["real_rig"]["methods"]
     assert set(real_methods) == {"full", "noskin", "do nothing", "closest point"}
     assert real_methods["closest point"]["sampled"]["real_to_real"]["mse_mm2"] < 1e-8
-    assert "invert" not in real_methods["closest point"]["sampled"]
+    # the template of closest point's rig is this rig: exact on its inversion and animation
+    assert real_methods["closest point"]["sampled"]["invert"]["rig_mse_mm2"] < 1e-6
+    assert real_methods["closest point"]["sampled"]["invert"]["weight_mae"] < 1e-4
+    assert real_methods["closest point"]["sampled"]["animate"]["mse_mm2"] < 1e-6
     # the floor: the unmoved neutral onto itself; doing nothing is exact there, so no ratio
     assert real_methods["do nothing"]["sampled"]["unmoved"]["mse_mm2"] == 0.0
     assert real["sampled"]["unmoved"]["mse_mm2"] > 0
@@ -390,7 +438,7 @@ def test_merge_puts_separately_evaluated_checkpoints_in_one_table(tmp_path, caps
     assert res["methods"] == ["do nothing", "a", "b", "closest point", "oracle (u,v)"]   # baselines once
     assert res["suites"]["self"]["ratios"]["b"] == single["suites"]["self"]["ratios"]["b"]
     assert res["suites"]["self"]["methods"]["b"] == single["suites"]["self"]["methods"]["b"]
-    assert set(res["suites"]["inverse"]["methods"]) == {"a", "b", "do nothing"}
+    assert set(res["suites"]["inverse"]["methods"]) == {"a", "b", "do nothing", "closest point"}
     assert "| b |" in (both / "eval.md").read_text()
     capsys.readouterr()
     # the same method twice, another config, a file that is not an eval.json: clear errors

@@ -6,7 +6,8 @@ checkpoint. ``--heads procedural``: procedural (u, v) heads (a full head, adapti
 a jittered face-only crop); ``--heads makehuman``: realistic MakeHuman heads (head and neck,
 decimated -> a jittered bust). Both are synthesised rigs, so the target's own rig driven by the same
 weights is the exact ground truth, and the demo prints true errors beside those of doing nothing
-(the target left neutral).
+(the target left neutral) and of closest-point displacement transfer (for the inverted weights: the
+packaged ARKit rig carried onto the source by closest point and fitted to each frame).
 """
 from __future__ import annotations
 
@@ -101,7 +102,9 @@ def run(args) -> int:
     from ..glb import write_rig_glb, write_sequence_glb
     from ..io import check_output, save_mesh
     from ..mesh import Mesh
+    from ..evaluate import template_rig
     from ..metrics import mse_mm2, segment_mse_mm2, squared_errors_mm2
+    from ..oracle import closest_point_rig, closest_point_transfer, fit_rig_weights
     from ..render import Renderer, contact_sheet, heatmap_colors, save_png
     from data_synth.facs import FACS_NAMES
 
@@ -128,6 +131,15 @@ def run(args) -> int:
     pred = r.transfer(src_frames, target, source_neutral=src_neutral, progress=True, refine=refine)
     gt = tgt_rig.evaluate(weights)
     inverted = r.invert(src_frames, source_neutral=src_neutral, refine=refine)
+    # what a user would try instead: closest-point displacement transfer; for the weights, the
+    # packaged ARKit rig carried onto the source by closest point and fitted to each frame
+    closest = closest_point_transfer(src_rig.neutral, src_rig.faces, src_rig.evaluate(weights),
+                                     tgt_rig.neutral, tgt_rig.faces)
+    template, arkit_ict = template_rig()
+    template_shapes = closest_point_rig(template.neutral, template.faces, template.deltas,
+                                        src_rig.neutral, src_rig.faces)
+    closest_weights = np.clip(fit_rig_weights(template_shapes, src_rig.neutral,
+                                              src_rig.evaluate(weights)) @ arkit_ict, 0, 1)
     # the same take as if it had come without its neutral mesh: the neutral estimated from it
     estimated = r.transfer(src_frames, target, source_neutral=r.estimate_neutral(src_frames),
                            refine=refine)
@@ -165,8 +177,11 @@ def run(args) -> int:
     ratios = f" (ratios {mse / mse0:.2f}, {seg / seg0:.2f})" if min(mse0, seg0) > 0 else ""
     print(f"  doing nothing (target left neutral): MSE {mse0:.3f} mm², segment-averaged "
           f"{seg0:.3f} mm²{ratios}")
+    print(f"  closest-point displacement transfer: MSE {mse_mm2(closest, gt):.3f} mm², "
+          f"segment-averaged {segment_mse_mm2(closest, gt, tgt_rig.segments, L)[0]:.3f} mm²")
     print(f"  inverse rigging of the source: weight MAE {mae:.3f} (predicting 0: "
-          f"{float(np.abs(weights).mean()):.3f})")
+          f"{float(np.abs(weights).mean()):.3f}; the ARKit template rig carried over by closest "
+          f"point and fitted: {float(np.abs(closest_weights - weights).mean()):.3f})")
     print(f"  without the source's neutral, estimated from the take (--estimate-neutral"
           f"{' --refine' if refine else ''}): MSE {mse_mm2(estimated, gt):.3f} mm², "
           f"segment-averaged {segment_mse_mm2(estimated, gt, tgt_rig.segments, L)[0]:.3f} mm²")

@@ -32,7 +32,7 @@ ESTIMATE = "estimated neutral + refine"
 
 
 def g(x: float) -> str:
-    return "0" if abs(x) < 1e-20 else f"{x:.4g}"   # exact (closest point on one mesh)
+    return "0" if abs(x) < 1e-6 else f"{x:.4g}"   # exact (closest point on one mesh or rig)
 
 
 def value(suites: dict, suite: str, method: str, kind: str):
@@ -46,7 +46,7 @@ def value(suites: dict, suite: str, method: str, kind: str):
         return m["seg_mse_mm2"], m["weight_mae"]
     e = m["sampled"]
     key = {"real_to_real": "real_to_real", "invert": "invert", "real_animate": "animate"}.get(kind, "unmoved")
-    if key not in e:                            # closest point neither inverts nor animates
+    if key not in e:
         return None
     if kind == "real_to_real":
         return e["real_to_real"]["mse_mm2"], None
@@ -59,7 +59,7 @@ def cell(v, nothing) -> str:
     if v is None:
         return "—"
     err, mae = v
-    ratio = f" ({err / nothing[0]:.2f}×)" if nothing and nothing[0] > 0 and err > 1e-20 else ""
+    ratio = f" ({err / nothing[0]:.2f}×)" if nothing and nothing[0] > 0 and err > 1e-6 else ""
     return g(err) + ratio + (f" / {mae:.3f}" if mae is not None else "")
 
 

@@ -11,6 +11,10 @@ weights (ICT; ARKit for the ARKit rig, with its ARKit → ICT matrix) and the tr
     python docs/results/weight_mae/rig_span/cases.py --seed 100 --out runs/rig_span/tuning100.npz
     python docs/results/weight_mae/rig_span/cases.py --config configs/eval/validation.yaml --out runs/rig_span/val.npz
 
+``--readings`` adds the expression encoder's reading (with the neutral) of each baked one-hot frame
+neutral + B̂_k, minus its reading of the neutral itself: E (53, 53), row k; and for the ICT-rigged
+suites E_true, the same on the true one-hot frames (docs/results/weight_mae/calibration/).
+
 ``--seed`` without ``--config``: the tuning set (configs/eval/study.yaml, test identities apart from
 the eval's). ``load`` reads a file back; ``fit`` is invert's weights fit (``SourceRig.fit``) with
 optional per-vertex weights; ``weight_mae`` the eval's MAE.
@@ -25,9 +29,11 @@ KINDS = ("uniform", "onehot", "sparse")
 SUITES = ("inverse", "head_inverse", "real_rig")
 
 
-def dump(config: str | None, seed: int, checkpoint: str | None, out: str) -> None:
+def dump(config: str | None, seed: int, checkpoint: str | None, out: str,
+         readings: bool = False) -> None:
     from retarget.api import Retargeter, basis_shapes
     from retarget.evaluate import EvalData, NetworkMethod, arkit_ict_matrix, load_eval_config
+    from retarget.mesh import Mesh
 
     cfg = load_eval_config(config or "configs/eval/study.yaml")
     if config is None:
@@ -36,6 +42,11 @@ def dump(config: str | None, seed: int, checkpoint: str | None, out: str) -> Non
     r = Retargeter.load(checkpoint)
     method = NetworkMethod("network", r, "refine")
     store = {}
+
+    def reading(neutral, deltas):
+        frames = [Mesh(neutral.vertices + d.reshape(-1, 3), neutral.faces) for d in deltas]
+        z = r.encode([neutral] + frames, source_neutral=neutral)[:, :53]
+        return z[1:] - z[0]
 
     def put(suite, case, extra=None):
         frames, neutral = method._source(case)
@@ -47,6 +58,10 @@ def dump(config: str | None, seed: int, checkpoint: str | None, out: str) -> Non
                     frames=np.stack([f.vertices for f in frames]), w0=z[:, :53],
                     gt=case.source_weights, true=case.source.deltas.reshape(len(case.source.deltas), -1),
                     **(extra or {}))
+        if readings:
+            item["E"] = reading(neutral, rig.basis)
+            if suite != "real_rig":
+                item["E_true"] = reading(neutral, item["true"])
         i = len({k.split("/")[0] for k in store})
         store.update({f"{i}/{k}": np.asarray(v) for k, v in item.items()})
 
@@ -144,8 +159,9 @@ def main():
     ap.add_argument("--seed", type=int, default=100)
     ap.add_argument("--checkpoint", default=None)
     ap.add_argument("--out", required=True)
+    ap.add_argument("--readings", action="store_true", help="add the encoder's readings E, E_true")
     args = ap.parse_args()
-    dump(args.config, args.seed, args.checkpoint, args.out)
+    dump(args.config, args.seed, args.checkpoint, args.out, args.readings)
 
 
 if __name__ == "__main__":
