@@ -48,6 +48,7 @@ from .errors import RetargetError
 from .mesh import Mesh, as_mesh, face_part, is_mesh_like, submesh
 from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh, vertex_features
 from .smoothing import smooth_codes
+from .stabilise import MISMATCH, RigidMotion, rest_vertices, rigid_fit
 
 DEFAULT_CHECKPOINT = "default.pt"
 MIN_VERTICES = 50   # fewer cannot describe a face
@@ -270,7 +271,9 @@ class SourceRig:
     target: the source neutral prepared as a target; baked: its 53 decoded one-hot shapes (source
     units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; gram: AᵀA (53,53) float64, whose
     ridge factors (one per prior, the pull towards the encoder's estimate) are made when first
-    used (factors). With the basis decoder also free_basis: F (code_dim − 53, 3V) float32, the
+    used (factors); rest: the indices of the face's vertices the baked shapes move least
+    (``retarget.stabilise.rest_vertices``, in the mesh's indexing), on which a frame's head
+    motion is fitted (``Retargeter.stabilise_frames``). With the basis decoder also free_basis: F (code_dim − 53, 3V) float32, the
     rig's columns of the free dims of z_GE (source units), and its factor free_chol with ridge
     free_ridge (``fit_free``, prior ``free_prior``); None for the MLP decoder. Made once per
     neutral.
@@ -284,13 +287,16 @@ class SourceRig:
     free_chol: np.ndarray | None = None
     free_ridge: float = 0.0
     factors: dict = field(default_factory=dict)
+    rest: np.ndarray | None = None
 
     @classmethod
     def make(cls, target: Target, baked: BakedRig, free: np.ndarray | None = None,
              free_prior: float = 1e-3) -> "SourceRig":
         """free: (code_dim − 53, V, 3) the basis decoder's shapes of the free dims in source units."""
         a = np.ascontiguousarray(baked.deltas.reshape(N_FACS, -1), np.float32)   # Aᵀ (53, 3V)
-        rig = cls(target, baked, a, _gram(a))
+        face = None if target is None else target.face       # rest vertices on the face only
+        rest = rest_vertices(baked.deltas) if face is None else face[rest_vertices(baked.deltas[:, face])]
+        rig = cls(target, baked, a, _gram(a), rest=rest)
         if free is not None:
             rig.free_basis = np.ascontiguousarray(free.reshape(len(free), -1), np.float32)
             rig.free_chol, rig.free_ridge = _ridge_factor(_gram(rig.free_basis), free_prior)
@@ -388,7 +394,9 @@ class Retargeter:
     results back (``canonicaliser``; False: every mesh as it faces). face_only: for a mesh with
     separate parts (eyeballs, teeth, a tongue, lashes beside the skin), the network sees the
     face alone (``retarget.mesh.face_part``: the part with the most vertices) and the other parts
-    keep their place in every result (False: the whole mesh is the face).
+    keep their place in every result (False: the whole mesh is the face). stabilise: remove each
+    source frame's head motion against the source's neutral, where one is given, before the frame
+    is read (``stabilise_frames``; False: frames are taken as they are).
     """
 
     #: Analysis-by-synthesis (``refine``): weight of the pull towards the encoder's estimate,
@@ -427,7 +435,7 @@ class Retargeter:
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
                  refine_steps: int = 0, code_map: np.ndarray | None = None,
                  code_map_gate: np.ndarray | None = None, upright: bool = True,
-                 face_only: bool = True):
+                 face_only: bool = True, stabilise: bool = True):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
@@ -443,6 +451,7 @@ class Retargeter:
         self.refine_steps = refine_steps   # gradient steps on the free dims of z_GE after the fit
         self.upright = upright             # turn tilted heads upright first (``canonicaliser``)
         self.face_only = face_only         # the network sees a mesh's face part alone
+        self.stabilise = stabilise         # source frames' head motion removed (``stabilise_frames``)
 
     @property
     def code_map(self) -> np.ndarray | None:
@@ -606,7 +615,8 @@ class Retargeter:
         a ``(vertices, faces)`` pair) or a list of frames sharing a topology -> (128,) or (T,128).
 
         The frames of a call share one canonical frame, that of ``source_neutral`` if given, else of
-        the first frame. They share one set of operators (and, above ``proxy_vertices``, one
+        the first frame; with ``source_neutral`` each frame's head motion against it is removed
+        first (``stabilise_frames``, unless ``stabilise`` is off). They share one set of operators (and, above ``proxy_vertices``, one
         vertex-clustered proxy: each frame's proxy vertex = the mean of its cluster), those of the
         source's topology, and the turn that faces it +z (``canonicaliser``): computed on
         ``source_neutral`` if given, else on the first frame of that
@@ -618,6 +628,8 @@ class Retargeter:
 
         frames, single = source_frames(frames)
         neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
+        if neutral is not None and self.stabilise:
+            frames = self.stabilise_frames(frames, neutral)[0]
         ref = neutral or frames[0]
         check_head_like(ref, "source")
         src = self.source_topology(ref, neutral=neutral is not None)
@@ -678,6 +690,37 @@ class Retargeter:
                                                     self.REFINE_FREE_PRIOR)
         return self._source_rigs[key]
 
+    def stabilise_frames(self, frames, source_neutral: Mesh) -> tuple[list[Mesh], list[RigidMotion]]:
+        """The frames with their head motion against ``source_neutral`` removed, and that motion
+        (``retarget.stabilise``): for each frame the rigid motion carrying the neutral onto it on
+        the neutral's rest vertices, those the source's own rig (``source_rig``, baked once per
+        neutral) moves least, is fitted robustly and undone. A frame that does not move
+        (``RigidMotion.still``) is returned as it is. frames: a Mesh or a list sharing the
+        neutral's topology -> (list of Meshes in the neutral's frame, list of ``RigidMotion``).
+        RetargetError naming the frame when its vertex count differs from the neutral's, or when
+        even the best rigid fit leaves its vertices far from the neutral's (another vertex
+        order, other units)."""
+        frames, _ = source_frames(frames)
+        neutral = as_mesh(source_neutral, role="source neutral")
+        name = neutral.name or "the source neutral"
+        for i, f in enumerate(frames):
+            if f.n_vertices != neutral.n_vertices:
+                raise RetargetError(f"{f.name or f'source frame {i}'}: {f.n_vertices} vertices, but "
+                                    f"{name} has {neutral.n_vertices}; they must share a topology")
+        rest = self.source_rig(neutral).rest
+        out, motions = [], []
+        for i, f in enumerate(frames):
+            m = rigid_fit(f.vertices, neutral.vertices, rest)
+            if m.mismatch > MISMATCH:
+                raise RetargetError(
+                    f"{f.name or f'source frame {i}'}: its vertices do not follow those of {name} one "
+                    f"by one: even after the best rigid alignment the typical vertex lies "
+                    f"{m.mismatch:.0%} of the head's size from its place on the neutral. Frames and "
+                    f"neutral must share their vertex order and units")
+            motions.append(m)
+            out.append(f if m.still else Mesh(m.remove(f.vertices), f.faces, f.name))
+        return out, motions
+
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
                prior: float | None = None, sparsity: float | None = None,
                joint: bool | None = None, reweight: tuple = ()) -> np.ndarray:
@@ -712,11 +755,14 @@ class Retargeter:
         towards the encoder (default ``REFINE_PRIOR``); sparsity: their L1 pull towards 0
         (``SourceRig.fit``; default ``REFINE_SPARSITY``). joint: weights and free dims fitted
         together (``SourceRig.fit_joint``, basis decoder; default ``REFINE_JOINT``). reweight:
-        reweighted L1 of the weights-alone fit (``SourceRig.fit``; () = off)."""
+        reweighted L1 of the weights-alone fit (``SourceRig.fit``; () = off). The frames' head
+        motion is removed first (``stabilise_frames``, unless ``stabilise`` is off)."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
                                 "--source-neutral on the command line)")
         frames, _ = source_frames(frames)
+        if self.stabilise:
+            frames = self.stabilise_frames(frames, source_neutral)[0]
         z = np.asarray(z_ge, np.float32).reshape(len(frames), -1)
         rig = self.source_rig(source_neutral)
         prior = self.REFINE_PRIOR if prior is None else prior
@@ -750,6 +796,7 @@ class Retargeter:
         neutral's topology; weights (53,) or (T,53), e.g. from ``invert``."""
         frames, neutral = _residual_frames(frames, source_neutral, weights, N_FACS, "fit_residuals",
                                            "weights")
+        frames = self.stabilise_frames(frames, neutral)[0] if self.stabilise else frames
         rig = self.source_rig(neutral)
         w = np.asarray(weights, np.float32).reshape(len(frames), N_FACS)
         return _residual_rms(frames, rig.baked.evaluate(w), rig.target.mesh.vertices)
@@ -762,6 +809,7 @@ class Retargeter:
         ``expression_codes(frames, source_neutral, refine=True)``."""
         frames, neutral = _residual_frames(frames, source_neutral, codes, self.cfg.code_dim,
                                            "code_residuals", "codes")
+        frames = self.stabilise_frames(frames, neutral)[0] if self.stabilise else frames
         rig = self._source_rigs.get(_rig_key(neutral))
         target = rig.target if rig is not None else self.prepare(neutral)   # refine's, if made
         z = np.asarray(codes, np.float32).reshape(len(frames), self.cfg.code_dim)

@@ -51,6 +51,10 @@ def add_neutral_args(p) -> None:
     p.add_argument("--refine-steps", type=int, default=0, metavar="N",
                    help="with --refine and an MLP decoder, then fit the free dims of z_GE by N gradient "
                         "steps (default 0); a basis decoder always solves them exactly")
+    p.add_argument("--no-stabilise", action="store_true",
+                   help="take the frames as they are: do not remove their head motion (the head "
+                        "turning or moving as a whole) against the source neutral before reading "
+                        "them (docs/RESULTS.md, \"Frames that move as a whole\")")
 
 
 def add_residuals_arg(p, what: str) -> None:
@@ -133,8 +137,9 @@ def print_neutral_hint(args) -> None:
 def print_notes(r, target=None, target_name: str = "", frames=None, neutral=None,
                 source_name: str = "") -> None:
     """Notes on stderr on what ``r`` did to a head before the network saw it: turned it upright
-    (``Retargeter.canonicaliser``), or took its face alone from a mesh with separate parts
-    (``Retargeter.face_only``). ``target`` a prepared Target, and the source (``frames`` with
+    (``Retargeter.canonicaliser``), took its face alone from a mesh with separate parts
+    (``Retargeter.face_only``), or removed the source frames' head motion
+    (``Retargeter.stabilise_frames``). ``target`` a prepared Target, and the source (``frames`` with
     their ``neutral`` or None, after they were encoded: their topology is cached)."""
     from ..canonical import rotation_angle
 
@@ -156,6 +161,14 @@ def print_notes(r, target=None, target_name: str = "", frames=None, neutral=None
             print(f"{name}: the head is turned {rotation_angle(canon.rotation):.1f} degrees from facing "
                   "+z; the network saw it upright, the results are in its own frame (--no-upright: "
                   "take it as it faces)", file=sys.stderr)
+    if frames is not None and neutral is not None and r.stabilise:
+        moving = [m for m in r.stabilise_frames(frames, neutral)[1] if not m.still]
+        if moving:
+            print(f"source: {len(moving)} of {len(frames)} frame(s) move as a whole against the "
+                  f"neutral (turned up to {max(m.angle_degrees() for m in moving):.1f} degrees, "
+                  f"vertices carried up to {100 * max(m.moved for m in moving):.1f} % of the head's "
+                  "size); that head motion was removed before reading the expressions "
+                  "(--no-stabilise: keep it)", file=sys.stderr)
 
 
 def estimated_neutral(args, r, frames, neutral):
@@ -201,7 +214,8 @@ def retargeter(args):
     return Retargeter.load(args.checkpoint, device=args.device,
                            refine_steps=getattr(args, "refine_steps", 0),
                            upright=not getattr(args, "no_upright", False),
-                           face_only=not getattr(args, "all_parts", False), **extra)
+                           face_only=not getattr(args, "all_parts", False),
+                           stabilise=not getattr(args, "no_stabilise", False), **extra)
 
 
 def rotation(args) -> np.ndarray:

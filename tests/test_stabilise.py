@@ -1,0 +1,104 @@
+"""Head stabilisation (retarget.stabilise, Retargeter.stabilise_frames): the rigid motion of a
+frame against its neutral found on the rest vertices and removed; frames that do not correspond
+to the neutral refused."""
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+from data_synth.identity import sample_identity
+from data_synth.rig import build_rig
+from data_synth.tessellate import tessellate
+from nets.model import NFSConfig, NFSModel
+from retarget.api import Retargeter
+from retarget.errors import RetargetError
+from retarget.mesh import Mesh
+from retarget.stabilise import MISMATCH, REST_SHARE, rest_vertices, rigid_fit
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return build_rig(sample_identity(0, split="test"), tessellate(n_vertices=1500, kind="regular"))
+
+
+def moved(points, degrees, axis, shift):
+    q = Rotation.from_rotvec(np.radians(degrees) * np.asarray(axis, float) / np.linalg.norm(axis)).as_matrix()
+    return points @ q.T + shift, q
+
+
+def test_rest_vertices_are_those_the_rig_moves_least():
+    deltas = np.random.default_rng(0).normal(size=(4, 3000, 3))
+    deltas[:, 100:300] *= 1e-3
+    rest = rest_vertices(deltas)
+    assert len(rest) == round(REST_SHARE * 3000) and set(rest) <= set(range(100, 300))
+    assert len(rest_vertices(deltas[:, :500])) == 100          # never fewer than MIN_REST
+
+
+def test_rigid_fit_recovers_a_head_turn_under_an_expression(rig):
+    w = np.random.default_rng(1).uniform(0, 1, 53)
+    frame = rig.neutral + np.tensordot(w, rig.deltas, axes=1)          # every shape at once
+    rest = rest_vertices(rig.deltas)
+    turned, q = moved(frame, 8.0, [1, 2, 0.5], [0.7, -0.4, 1.1])
+    m = rigid_fit(turned, rig.neutral, rest)
+    assert np.allclose(m.rotation, q, atol=1e-6) and m.angle_degrees() == pytest.approx(8.0, abs=1e-4)
+    assert np.abs(m.remove(turned) - frame).max() < 1e-5
+    assert not m.still and m.mismatch < 0.01
+    # the same expression unmoved: no motion, so nothing to remove
+    still = rigid_fit(frame, rig.neutral, rest)
+    assert still.still and np.abs(still.remove(frame) - frame).max() < 1e-6
+    # a plain least-squares fit on every vertex is pulled by the expression
+    every = rigid_fit(frame, rig.neutral, np.arange(len(frame)))
+    assert every.moved > 10 * still.moved
+
+
+def test_a_neutral_in_another_vertex_order_is_a_mismatch(rig):
+    perm = np.random.default_rng(2).permutation(len(rig.neutral))
+    m = rigid_fit(rig.neutral[perm], rig.neutral, rest_vertices(rig.deltas))
+    assert m.mismatch > MISMATCH
+    assert rigid_fit(rig.neutral * 10.0, rig.neutral, rest_vertices(rig.deltas)).mismatch > MISMATCH
+
+
+@pytest.fixture(scope="module")
+def r():
+    torch.manual_seed(0)
+    return Retargeter(NFSModel(NFSConfig.preset("tiny", neutral_channels=True)), device="cpu")
+
+
+def test_frames_moving_as_a_whole_read_as_the_same_expression(r, rig):
+    neutral = Mesh(rig.neutral, rig.faces, "neutral")
+    rest = r.source_rig(neutral).rest
+    # frames that move only off the rest vertices of the source's rig: their expression
+    w = np.random.default_rng(3).uniform(0, 1, (2, 53))
+    motion = np.tensordot(w, rig.deltas, axes=1)
+    motion[:, rest] = 0.0
+    frames = [Mesh(rig.neutral + d, rig.faces, f"f{i}") for i, d in enumerate(motion)]
+    turned = [Mesh(moved(f.vertices, 6.0 * (i + 1), [0, 1, 0.3], [0.5, 0.2, -0.3])[0], rig.faces, f.name)
+              for i, f in enumerate(frames)]
+    out, motions = r.stabilise_frames(turned, neutral)
+    assert [m.angle_degrees() for m in motions] == pytest.approx([6.0, 12.0], abs=1e-4)
+    assert all(np.abs(o.vertices - f.vertices).max() < 1e-5 for o, f in zip(out, frames))
+    same, still = r.stabilise_frames(frames, neutral)
+    assert all(s is f for s, f in zip(same, frames)) and all(m.still for m in still)
+    for refine in (False, True):
+        a = r.invert(turned, source_neutral=neutral, refine=refine)
+        b = r.invert(frames, source_neutral=neutral, refine=refine)
+        np.testing.assert_allclose(a, b, atol=1e-4)
+    np.testing.assert_allclose(r.expression_codes(turned, neutral, refine=True),
+                               r.expression_codes(frames, neutral, refine=True), atol=1e-4)
+    # switched off, the head motion is read as expression
+    r.stabilise = False
+    try:
+        assert np.abs(r.encode(turned, neutral) - r.encode(frames, neutral)).max() > 1e-3
+    finally:
+        r.stabilise = True
+
+
+def test_frames_that_do_not_follow_the_neutral_are_refused(r, rig):
+    neutral = Mesh(rig.neutral, rig.faces, "neutral.obj")
+    perm = np.random.default_rng(4).permutation(len(rig.neutral))
+    scrambled = Mesh(rig.neutral[perm], rig.faces, "frame_0001.obj")
+    with pytest.raises(RetargetError, match=r"frame_0001.obj: its vertices do not follow those of "
+                                            r"neutral.obj one by one"):
+        r.invert([scrambled], source_neutral=neutral)
+    with pytest.raises(RetargetError, match="frame_0001.obj: 10 vertices, but neutral.obj has"):
+        r.stabilise_frames([Mesh(rig.neutral[:10], np.array([[0, 1, 2]]), "frame_0001.obj")], neutral)
