@@ -615,8 +615,9 @@ class Retargeter:
         a ``(vertices, faces)`` pair) or a list of frames sharing a topology -> (128,) or (T,128).
 
         The frames of a call share one canonical frame, that of ``source_neutral`` if given, else of
-        the first frame; with ``source_neutral`` each frame's head motion against it is removed
-        first (``stabilise_frames``, unless ``stabilise`` is off). They share one set of operators (and, above ``proxy_vertices``, one
+        the first frame; each frame's head motion against ``source_neutral``, or without it
+        against the first frame, is removed first (``stabilise_frames``, unless ``stabilise`` is
+        off). They share one set of operators (and, above ``proxy_vertices``, one
         vertex-clustered proxy: each frame's proxy vertex = the mean of its cluster), those of the
         source's topology, and the turn that faces it +z (``canonicaliser``): computed on
         ``source_neutral`` if given, else on the first frame of that
@@ -628,8 +629,8 @@ class Retargeter:
 
         frames, single = source_frames(frames)
         neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
-        if neutral is not None and self.stabilise:
-            frames = self.stabilise_frames(frames, neutral)[0]
+        if self.stabilise and (neutral is not None or len(frames) > 1):
+            frames = self.stabilise_frames(frames, neutral or frames[0])[0]
         ref = neutral or frames[0]
         check_head_like(ref, "source")
         src = self.source_topology(ref, neutral=neutral is not None)
@@ -694,7 +695,9 @@ class Retargeter:
         """The frames with their head motion against ``source_neutral`` removed, and that motion
         (``retarget.stabilise``): for each frame the rigid motion carrying the neutral onto it on
         the neutral's rest vertices, those the source's own rig (``source_rig``, baked once per
-        neutral) moves least, is fitted robustly and undone. A frame that does not move
+        neutral) moves least, is fitted robustly and undone. Without a neutral mesh, ``encode``
+        and ``estimate_neutral`` pass a take's first frame as ``source_neutral`` (its rig baked as
+        if it were the neutral). A frame that does not move
         (``RigidMotion.still``) is returned as it is. frames: a Mesh or a list sharing the
         neutral's topology -> (list of Meshes in the neutral's frame, list of ``RigidMotion``).
         RetargetError naming the frame when its vertex count differs from the neutral's, or when
@@ -826,11 +829,14 @@ class Retargeter:
         that frame's own reading back; the more varied the take, the better the estimate.
 
         frames: a Mesh or a list of frames sharing a topology (at most ``max_frames``, default
-        ``ESTIMATE_FRAMES``, evenly spaced, are used) -> a Mesh of their topology, in their frame
-        and units."""
+        ``ESTIMATE_FRAMES``, evenly spaced, are used; their head motion against the first of them
+        removed first, unless ``stabilise`` is off) -> a Mesh of their topology, in the first
+        frame's place and units."""
         frames, _ = source_frames(frames)
         n = min(len(frames), int(max_frames or self.ESTIMATE_FRAMES))
         picked = [frames[i] for i in np.unique(np.linspace(0, len(frames) - 1, n).round().astype(int))]
+        if self.stabilise and len(picked) > 1:        # in the first frame's place
+            picked = self.stabilise_frames(picked, picked[0])[0]
         z = self.encode(picked)                                  # (T', 128): a list always
         first = picked[0]
         identity = self.prepare(first)

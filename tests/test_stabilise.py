@@ -102,3 +102,22 @@ def test_frames_that_do_not_follow_the_neutral_are_refused(r, rig):
         r.invert([scrambled], source_neutral=neutral)
     with pytest.raises(RetargetError, match="frame_0001.obj: 10 vertices, but neutral.obj has"):
         r.stabilise_frames([Mesh(rig.neutral[:10], np.array([[0, 1, 2]]), "frame_0001.obj")], neutral)
+
+
+def test_a_take_without_its_neutral_is_stabilised_on_its_first_frame(r, rig):
+    first = Mesh(rig.neutral, rig.faces, "f0")
+    rest = r.source_rig(first).rest
+    w = np.random.default_rng(5).uniform(0, 1, (3, 53))
+    motion = np.tensordot(w, rig.deltas, axes=1)
+    motion[:, rest] = 0.0
+    frames = [first] + [Mesh(rig.neutral + d, rig.faces, f"f{i + 1}") for i, d in enumerate(motion)]
+    turned = [first] + [Mesh(moved(f.vertices, 5.0, [1, 0, 0.2], [0.3, 0.0, 0.1])[0], rig.faces, f.name)
+                        for f in frames[1:]]
+    np.testing.assert_allclose(r.encode(turned), r.encode(frames), atol=1e-4)
+    np.testing.assert_allclose(r.estimate_neutral(turned).vertices, r.estimate_neutral(frames).vertices,
+                               atol=1e-4)
+    r.stabilise = False
+    try:
+        assert np.abs(r.encode(turned) - r.encode(frames)).max() > 1e-3
+    finally:
+        r.stabilise = True

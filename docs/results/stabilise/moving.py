@@ -46,6 +46,13 @@ def plain_align(frames: np.ndarray, neutral: np.ndarray) -> np.ndarray:
     return out
 
 
+def source_neutral(r, row: str, frames, neutral):
+    """The neutral a row gives the network: the case's, one estimated from the frames, or none."""
+    if "estimated" in row:
+        return r.estimate_neutral(frames)
+    return None if "no neutral" in row else neutral
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True)
@@ -68,6 +75,8 @@ def main() -> None:
     cases += [("ARKit rig real → real", real_case), ("ARKit rig inversion", real_case)]
     columns = [("unmoved", 0.0)] + [(f"{d:g}°", d) for d in DEGREES]
     rows = ("do nothing", "network, neutral + refine", "network, neutral + refine, no stabilisation",
+            "network, estimated neutral + refine", "network, estimated neutral + refine, no stabilisation",
+            "network, no neutral", "network, no neutral, no stabilisation",
             "closest point, raw frames", "closest point, frames aligned on every vertex")
     table: dict = {}
     for c_i, (suite, case) in enumerate(cases):
@@ -78,13 +87,17 @@ def main() -> None:
             rng = np.random.default_rng([c_i, int(degrees * 10)])
             frames = head_motion(case.source_frames, degrees, rng) if degrees else case.source_frames
             meshes = [Mesh(f, case.source.faces) for f in frames]
+            for r in nets.values():      # each take a new performance: no turn kept from the last
+                r.clear_source_cache()  # take of this topology (Retargeter.encode)
             for row in rows:
                 key = (suite, row, col)
                 if inverse:
                     if row == "do nothing":
                         w = np.zeros((len(frames), 53))
                     elif row.startswith("network"):
-                        w = nets["no stabilisation" not in row].invert(meshes, src_neutral, refine=True)
+                        r = nets["no stabilisation" not in row]
+                        w = r.invert(meshes, source_neutral(r, row, meshes, src_neutral),
+                                     refine="refine" in row)
                     else:
                         continue
                     if arkit:
@@ -98,8 +111,9 @@ def main() -> None:
                         pred = np.broadcast_to(tgt.neutral, case.gt.shape)
                     elif row.startswith("network"):
                         r = nets["no stabilisation" not in row]
-                        pred = r.transfer(meshes, r.prepare(Mesh(tgt.neutral, tgt.faces)), src_neutral,
-                                          refine=True)
+                        pred = r.transfer(meshes, r.prepare(Mesh(tgt.neutral, tgt.faces)),
+                                          source_neutral(r, row, meshes, src_neutral),
+                                          refine="refine" in row)
                     else:
                         src = frames if "raw" in row else plain_align(frames, case.source.neutral)
                         pred = closest_point_transfer(case.source.neutral, case.source.faces, src,
