@@ -58,6 +58,14 @@ def test_a_neutral_in_another_vertex_order_is_a_mismatch(rig):
     assert rigid_fit(rig.neutral * 10.0, rig.neutral, rest_vertices(rig.deltas)).mismatch > MISMATCH
 
 
+def off_rest(rig, rest, n: int, seed: int, first: int = 0) -> list:
+    """n frames of random expressions of ``rig`` that leave the ``rest`` vertices where they are,
+    named f{first}, f{first + 1}, ..."""
+    motion = np.tensordot(np.random.default_rng(seed).uniform(0, 1, (n, 53)), rig.deltas, axes=1)
+    motion[:, rest] = 0.0
+    return [Mesh(rig.neutral + d, rig.faces, f"f{first + i}") for i, d in enumerate(motion)]
+
+
 @pytest.fixture(scope="module")
 def r():
     torch.manual_seed(0)
@@ -67,11 +75,7 @@ def r():
 def test_frames_moving_as_a_whole_read_as_the_same_expression(r, rig):
     neutral = Mesh(rig.neutral, rig.faces, "neutral")
     rest = r.source_rig(neutral).rest
-    # frames that move only off the rest vertices of the source's rig: their expression
-    w = np.random.default_rng(3).uniform(0, 1, (2, 53))
-    motion = np.tensordot(w, rig.deltas, axes=1)
-    motion[:, rest] = 0.0
-    frames = [Mesh(rig.neutral + d, rig.faces, f"f{i}") for i, d in enumerate(motion)]
+    frames = off_rest(rig, rest, 2, seed=3)    # their expression leaves the rest vertices alone
     turned = [Mesh(moved(f.vertices, 6.0 * (i + 1), [0, 1, 0.3], [0.5, 0.2, -0.3])[0], rig.faces, f.name)
               for i, f in enumerate(frames)]
     out, motions = r.stabilise_frames(turned, neutral)
@@ -107,10 +111,7 @@ def test_frames_that_do_not_follow_the_neutral_are_refused(r, rig):
 def test_a_take_without_its_neutral_is_stabilised_on_its_first_frame(r, rig):
     first = Mesh(rig.neutral, rig.faces, "f0")
     rest = r.source_rig(first).rest
-    w = np.random.default_rng(5).uniform(0, 1, (3, 53))
-    motion = np.tensordot(w, rig.deltas, axes=1)
-    motion[:, rest] = 0.0
-    frames = [first] + [Mesh(rig.neutral + d, rig.faces, f"f{i + 1}") for i, d in enumerate(motion)]
+    frames = [first] + off_rest(rig, rest, 3, seed=5, first=1)
     turned = [first] + [Mesh(moved(f.vertices, 5.0, [1, 0, 0.2], [0.3, 0.0, 0.1])[0], rig.faces, f.name)
                         for f in frames[1:]]
     np.testing.assert_allclose(r.encode(turned), r.encode(frames), atol=1e-4)
