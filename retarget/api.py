@@ -48,7 +48,7 @@ from .errors import RetargetError
 from .mesh import Mesh, as_mesh, face_part, is_mesh_like, submesh
 from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh, vertex_features
 from .smoothing import smooth_codes
-from .stabilise import MISMATCH, RigidMotion, rest_vertices, rigid_fit
+from .stabilise import MISMATCH, RigidMotion, carry_motion, rest_vertices, rigid_fit
 
 DEFAULT_CHECKPOINT = "default.pt"
 MIN_VERTICES = 50   # fewer cannot describe a face
@@ -634,9 +634,7 @@ class Retargeter:
         ref = neutral or frames[0]
         check_head_like(ref, "source")
         src = self.source_topology(ref, neutral=neutral is not None)
-        canon = src.canon if neutral is not None else Canonicaliser.fit(   # turned as the topology
-            src.proxy(ref).vertices, name=ref.name or "source", kind=self.cfg.canonical,
-            faces=src.faces, rotation=src.canon.rotation)
+        canon = self._source_canon(src, ref, neutral is not None)
         use_neutral = self.cfg.neutral_channels and neutral is not None
         if use_neutral and src.neutral is None:
             # the neutral in its own canonical frame: the reference of the encoder's neutral channels
@@ -657,6 +655,30 @@ class Retargeter:
                                                       channels))
         out = torch.stack(codes).cpu().numpy()
         return out[0] if single else out
+
+    def _source_canon(self, src: SourceTopology, ref: Mesh, neutral: bool) -> Canonicaliser:
+        """The canonical frame a source is read in: its neutral's (``src.canon``), or without a
+        neutral the frame fitted on the take's first frame ``ref``, turned as the topology is."""
+        if neutral:
+            return src.canon
+        return Canonicaliser.fit(src.proxy(ref).vertices, name=ref.name or "source",
+                                 kind=self.cfg.canonical, faces=src.faces, rotation=src.canon.rotation)
+
+    def carry_head_motion(self, frames, source_neutral, target, results):
+        """Yield the results on ``target`` (an iterable of T frames (V,3), e.g. ``iter_decode``'s)
+        one at a time, each moved as its source frame's head moved against ``source_neutral``
+        (without one, against the first frame): the frame's motion (``stabilise_frames``)
+        expressed in the source's canonical frame and applied in the target's
+        (``retarget.stabilise.carry_motion``), to every vertex of the target mesh; (V,3) float64
+        in the target's units."""
+        frames, _ = source_frames(frames)
+        neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
+        ref = neutral or frames[0]
+        canon = self._source_canon(self.source_topology(ref, neutral=neutral is not None), ref,
+                                   neutral is not None)
+        target_canon = self.prepare(target).proxy.canon
+        for motion, v in zip(self.stabilise_frames(frames, ref)[1], results):
+            yield carry_motion(motion, canon, target_canon, v)
 
     def invert(self, frames, source_neutral: Mesh | None = None, smooth: str | None = None,
                fps: float = 30.0, progress: bool = False, refine: bool = False) -> np.ndarray:
@@ -914,12 +936,23 @@ class Retargeter:
 
     def transfer(self, source, target, source_neutral: Mesh | None = None,
                  smooth: str | None = None, fps: float = 30.0, progress: bool = False,
-                 refine: bool = False) -> np.ndarray:
+                 refine: bool = False, head_motion: bool = False) -> np.ndarray:
         """Clone the expression of source frame(s) onto a target neutral mesh (any topology).
         source: a Mesh or a list of frames -> (V_tgt,3) or (T,V_tgt,3) in the target's units.
-        ``refine``: codes from analysis-by-synthesis on the source (needs ``source_neutral``)."""
-        return self.decode(target, self.expression_codes(source, source_neutral, smooth, fps, progress,
-                                                         refine), progress)
+        ``refine``: codes from analysis-by-synthesis on the source (needs ``source_neutral``).
+        The source's head motion is removed (``stabilise``) and the results carry the expression
+        alone; ``head_motion``: then carry the head motion onto the target too
+        (``carry_head_motion``; needs ``stabilise``)."""
+        if head_motion and not self.stabilise:
+            raise RetargetError("head_motion needs stabilise: the head motion is what stabilisation "
+                                "finds (--head-motion cannot go with --no-stabilise)")
+        target = self.prepare(target)
+        out = self.decode(target, self.expression_codes(source, source_neutral, smooth, fps, progress,
+                                                        refine), progress)
+        if not head_motion:
+            return out
+        return np.stack(list(self.carry_head_motion(source, source_neutral, target,
+                                                    out.reshape(-1, *out.shape[-2:])))).reshape(out.shape)
 
     def animate(self, target, weights, progress: bool = False) -> np.ndarray:
         """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list

@@ -101,3 +101,15 @@ def rigid_fit(frame: np.ndarray, neutral: np.ndarray, rest: np.ndarray) -> Rigid
     moved = float(np.linalg.norm(neutral @ r.T + t - neutral, axis=1).max()) / diag
     mismatch = float(np.median(np.linalg.norm((frame - t) @ r - neutral, axis=1))) / diag
     return RigidMotion(r, t, moved, mismatch)
+
+
+def carry_motion(motion: RigidMotion, source, target, vertices: np.ndarray) -> np.ndarray:
+    """A target's vertices (V,3) moved as the source's head moved: ``motion`` (the source's, in its
+    own units) expressed in the source's canonical frame (``source``, a
+    ``retarget.canonical.Canonicaliser``) and applied in the target's (``target``), so a turn
+    about the source's face becomes the same turn about the target's face and a shift scales with
+    the faces' sizes. -> (V,3) float64 in the target's units."""
+    corners = np.vstack([np.zeros(3), np.eye(3)])                 # four canonical points
+    moved = source.to_canonical(source.from_canonical(corners) @ motion.rotation.T + motion.translation)
+    r, t = _kabsch(corners, moved, np.ones(4))                    # exact: a similarity's image
+    return target.from_canonical(target.to_canonical(vertices) @ r.T + t)

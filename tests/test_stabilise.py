@@ -122,3 +122,54 @@ def test_a_take_without_its_neutral_is_stabilised_on_its_first_frame(r, rig):
         assert np.abs(r.encode(turned) - r.encode(frames)).max() > 1e-3
     finally:
         r.stabilise = True
+
+
+def test_head_motion_is_carried_onto_the_target_on_request(r, rig):
+    neutral = Mesh(rig.neutral, rig.faces, "neutral")
+    frames = off_rest(rig, r.source_rig(neutral).rest, 2, seed=6)
+    motions = [moved(np.zeros((1, 3)), 7.0 * (i + 1), [0.2, 1, 0], [0.4, -0.2, 0.3]) for i in range(2)]
+    turned = [Mesh(f.vertices @ q.T + t[0], rig.faces, f.name) for f, (t, q) in zip(frames, motions)]
+    still = r.transfer(turned, neutral, source_neutral=neutral)
+    carried = r.transfer(turned, neutral, source_neutral=neutral, head_motion=True)
+    # onto the source's own neutral the motion comes back as it was
+    for c, s, (t, q) in zip(carried, still, motions):
+        np.testing.assert_allclose(c, s @ q.T + t[0], atol=1e-6)
+    # onto a head twice as large and moved, the turn is the same and the shift twice as long
+    big = Mesh(rig.neutral * 2.0 + 5.0, rig.faces, "big")
+    still_big = r.transfer(turned, big, source_neutral=neutral)
+    carried_big = r.transfer(turned, big, source_neutral=neutral, head_motion=True)
+    for c, s, (t, q) in zip(carried_big, still_big, motions):
+        np.testing.assert_allclose(c, (s - 5.0) @ q.T + 2.0 * t[0] + 5.0, atol=1e-5)
+    r.stabilise = False
+    try:
+        with pytest.raises(RetargetError, match="head_motion needs stabilise"):
+            r.transfer(turned, neutral, source_neutral=neutral, head_motion=True)
+    finally:
+        r.stabilise = True
+
+
+def test_cli_carries_the_head_motion_with_head_motion_and_says_it_removed_it(tmp_path, rig, capsys):
+    from retarget.cli import main
+    from retarget.io import load_mesh, save_mesh
+
+    from .test_api import tiny_checkpoint
+
+    ckpt = tiny_checkpoint(tmp_path / "tiny.pt", neutral_channels=True)
+    save_mesh(tmp_path / "neutral.obj", rig.neutral, rig.faces)
+    r = Retargeter.load(ckpt, device="cpu")
+    rest = r.source_rig(Mesh(rig.neutral, rig.faces)).rest
+    turns = [moved(np.zeros((1, 3)), 6.0 * (i + 1), [1, 0.3, 0], [0.2, 0.1, -0.4]) for i in range(2)]
+    (tmp_path / "take").mkdir()
+    for i, (f, (t, q)) in enumerate(zip(off_rest(rig, rest, 2, seed=7), turns)):
+        save_mesh(tmp_path / "take" / f"f{i}.obj", f.vertices @ q.T + t[0], rig.faces)
+    common = [str(tmp_path / "take"), str(tmp_path / "neutral.obj"), "--source-neutral",
+              str(tmp_path / "neutral.obj"), "--checkpoint", str(ckpt), "--device", "cpu"]
+    assert main(["transfer", *common, "-o", str(tmp_path / "still")]) == 0
+    assert "2 of 2 frame(s) move as a whole against the neutral (turned up to 12.0 degrees" in capsys.readouterr().err
+    assert main(["transfer", *common, "-o", str(tmp_path / "moving"), "--head-motion"]) == 0
+    for i, (t, q) in enumerate(turns):
+        still = load_mesh(tmp_path / "still" / f"frame_{i:04d}.obj").vertices
+        moving = load_mesh(tmp_path / "moving" / f"frame_{i:04d}.obj").vertices
+        np.testing.assert_allclose(moving, still @ q.T + t[0], atol=1e-4)     # OBJ's 6 digits
+    assert main(["transfer", *common, "-o", str(tmp_path / "x"), "--head-motion", "--no-stabilise"]) == 2
+    assert "--head-motion needs the head motion that stabilisation finds" in capsys.readouterr().err

@@ -12,7 +12,8 @@ retarget transfer "capture/*.obj" character_neutral.obj -o out_frames/ --smooth 
 retarget transfer capture/ character_neutral.obj -o performance.glb --source-neutral actor_neutral.obj
 retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine
 retarget transfer capture/ character_neutral.obj -o out/ --estimate-neutral --refine
-retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine --residuals fit.csv"""
+retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine --residuals fit.csv
+retarget transfer capture/ character_neutral.obj -o out/ --source-neutral actor_neutral.obj --refine --head-motion"""
 
 
 def add_arguments(p):
@@ -21,15 +22,23 @@ def add_arguments(p):
     p.add_argument("-o", "--out", required=True, help="output .obj/.ply (one frame), .glb, or a folder")
     add_neutral_args(p)
     add_residuals_arg(p, "the codes sent to the target")
+    p.add_argument("--head-motion", action="store_true",
+                   help="carry the source frames' head motion (turning, moving as a whole against "
+                        "the source neutral, or the first frame) onto the target; by default it is "
+                        "removed and the target shows the expression alone")
     p.add_argument("--format", choices=("obj", "ply"), default="obj", help="frame files in a folder")
     add_smooth_arg(p)
     add_model_args(p)
 
 
 def run(args) -> int:
+    from ..errors import RetargetError
     from ..io import load_mesh, load_sequence, sequence_files
 
     check_neutral_args(args)
+    if args.head_motion and args.no_stabilise:
+        raise RetargetError("--head-motion needs the head motion that stabilisation finds: drop "
+                            "--no-stabilise")
     inputs = sequence_files(args.source) + [args.target]
     if args.source_neutral:
         inputs.append(args.source_neutral)
@@ -48,8 +57,10 @@ def run(args) -> int:
                            refine=args.refine)
     z = z.reshape(-1, z.shape[-1])
     print_notes(r, tgt, args.target, frames, neutral, args.source_neutral or args.source)
-    written = write_frames(args.out, r.iter_decode(tgt, z, progress=True), target.faces, inputs,
-                           args, fps=args.fps, n_frames=len(z))
+    results = r.iter_decode(tgt, z, progress=True)
+    if args.head_motion:
+        results = r.carry_head_motion(frames, neutral, tgt, results)
+    written = write_frames(args.out, results, target.faces, inputs, args, fps=args.fps, n_frames=len(z))
     print(f"wrote {len(frames)} frame(s) on {target.n_vertices} target vertices to "
           f"{written[0] if len(written) == 1 else args.out}")
     if args.residuals:
