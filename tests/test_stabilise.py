@@ -148,7 +148,7 @@ def test_head_motion_is_carried_onto_the_target_on_request(r, rig):
         r.stabilise = True
 
 
-def test_cli_carries_the_head_motion_with_head_motion_and_says_it_removed_it(tmp_path, rig, capsys):
+def test_cli_removes_reports_and_on_request_carries_the_head_motion(tmp_path, rig, capsys):
     from retarget.cli import main
     from retarget.io import load_mesh, save_mesh
 
@@ -173,3 +173,17 @@ def test_cli_carries_the_head_motion_with_head_motion_and_says_it_removed_it(tmp
         np.testing.assert_allclose(moving, still @ q.T + t[0], atol=1e-4)     # OBJ's 6 digits
     assert main(["transfer", *common, "-o", str(tmp_path / "x"), "--head-motion", "--no-stabilise"]) == 2
     assert "--head-motion needs the head motion that stabilisation finds" in capsys.readouterr().err
+    # invert writes the head poses it removed: a quaternion and a translation per frame
+    poses = tmp_path / "head.csv"
+    assert main(["invert", str(tmp_path / "take"), "-o", str(tmp_path / "w.csv"), "--source-neutral",
+                 str(tmp_path / "neutral.obj"), "--checkpoint", str(ckpt), "--device", "cpu",
+                 "--head-poses", str(poses)]) == 0
+    rows = np.loadtxt(poses, delimiter=",", skiprows=1)
+    assert rows.shape == (2, 10)
+    for row, (t, q) in zip(rows, turns):
+        np.testing.assert_allclose(Rotation.from_quat(row[[3, 4, 5, 2]]).as_matrix(), q, atol=1e-6)
+        np.testing.assert_allclose(row[6:9], t[0], atol=1e-5)
+        assert row[9] == pytest.approx(np.degrees(np.arccos((np.trace(q) - 1) / 2)), abs=1e-4)
+    assert main(["invert", str(tmp_path / "take"), "-o", str(tmp_path / "w.csv"),
+                 "--head-poses", str(tmp_path / "w.csv"), "--checkpoint", str(ckpt)]) == 2
+    assert "--head-poses and -o name the same file" in capsys.readouterr().err

@@ -65,18 +65,44 @@ def add_residuals_arg(p, what: str) -> None:
                         "share left unexplained); needs --source-neutral or --estimate-neutral")
 
 
+def check_side_csv(path, flag: str, args, inputs: list, taken=()) -> None:
+    """RetargetError, before any work, for a side output CSV (``flag``: --residuals, --head-poses)
+    onto an input, not a .csv, or onto -o or another side output (``taken``: (flag, path))."""
+    check_output(path, inputs, formats=(".csv",))
+    for other, other_path in (("-o", args.out), *taken):
+        if other_path and Path(path).resolve() == Path(other_path).resolve():
+            raise RetargetError(f"{path}: {flag} and {other} name the same file; give each its own")
+
+
 def check_residuals_arg(args, inputs: list) -> None:
-    """RetargetError, before any work, for --residuals without a neutral, onto an input, not a .csv,
-    or onto the -o output itself."""
+    """RetargetError, before any work, for --residuals without a neutral, or onto a file it may not
+    write (``check_side_csv``)."""
     if not args.residuals:
         return
     if not (args.source_neutral or args.estimate_neutral):
         raise RetargetError("--residuals needs --source-neutral (the source's neutral mesh) or "
                             "--estimate-neutral: the residual is measured on the source's neutral")
-    check_output(args.residuals, inputs, formats=(".csv",))
-    if Path(args.residuals).resolve() == Path(args.out).resolve():
-        raise RetargetError(f"{args.residuals}: --residuals and -o name the same file; give "
-                            "the residuals their own")
+    check_side_csv(args.residuals, "--residuals", args, inputs)
+
+
+def write_head_poses(path, motions, fps: float) -> None:
+    """Write frame, time, the head's rotation as a unit quaternion qw, qx, qy, qz, its translation
+    tx, ty, tz (frame ≈ neutral · Rᵀ + t, the frames' units) and angle_degrees, one row per
+    ``retarget.stabilise.RigidMotion``, as CSV, atomically."""
+    import csv
+
+    from scipy.spatial.transform import Rotation
+
+    from ..io import atomic_output
+
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["frame", "time", "qw", "qx", "qy", "qz", "tx", "ty", "tz", "angle_degrees"])
+        for t, m in enumerate(motions):
+            x, y, z, w = Rotation.from_matrix(m.rotation).as_quat()
+            out.writerow([str(t), f"{t / fps:.6f}"] + [f"{v:.9g}" for v in (w, x, y, z, *m.translation)]
+                         + [f"{m.angle_degrees():.6g}"])
+    print(f"wrote {len(motions)} head pose(s) to {path}")
 
 
 def write_residuals(path, residual: np.ndarray, motion: np.ndarray) -> np.ndarray:
