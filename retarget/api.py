@@ -273,10 +273,10 @@ class SourceRig:
     ridge factors (one per prior, the pull towards the encoder's estimate) are made when first
     used (factors); rest: the indices of the face's vertices the baked shapes move least
     (``retarget.stabilise.rest_vertices``, in the mesh's indexing), on which a frame's head
-    motion is fitted (``Retargeter.stabilise_frames``). With the basis decoder also free_basis: F (code_dim − 53, 3V) float32, the
-    rig's columns of the free dims of z_GE (source units), and its factor free_chol with ridge
-    free_ridge (``fit_free``, prior ``free_prior``); None for the MLP decoder. Made once per
-    neutral.
+    motion is fitted (``Retargeter.stabilise_frames``). With the basis decoder also free_basis:
+    F (code_dim − 53, 3V) float32, the rig's columns of the free dims of z_GE (source units),
+    and its factor free_chol with ridge free_ridge (``fit_free``, prior ``free_prior``); None for
+    the MLP decoder. Made once per neutral.
     """
 
     target: Target
@@ -395,8 +395,8 @@ class Retargeter:
     separate parts (eyeballs, teeth, a tongue, lashes beside the skin), the network sees the
     face alone (``retarget.mesh.face_part``: the part with the most vertices) and the other parts
     keep their place in every result (False: the whole mesh is the face). stabilise: remove each
-    source frame's head motion against the source's neutral, where one is given, before the frame
-    is read (``stabilise_frames``; False: frames are taken as they are).
+    source frame's head motion against the source's neutral (without one, against a take's first
+    frame) before the frame is read (``stabilise_frames``; False: frames are taken as they are).
     """
 
     #: Analysis-by-synthesis (``refine``): weight of the pull towards the encoder's estimate,
