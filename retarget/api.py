@@ -48,7 +48,7 @@ from .errors import RetargetError
 from .mesh import Mesh, as_mesh, face_part, is_mesh_like, submesh
 from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh, vertex_features
 from .smoothing import smooth_codes
-from .stabilise import MISMATCH, RigidMotion, carry_motion, rest_vertices, rigid_fit
+from .stabilise import MAX_REST, MISMATCH, RigidMotion, carry_motion, rest_vertices, rigid_fit
 
 DEFAULT_CHECKPOINT = "default.pt"
 MIN_VERTICES = 50   # fewer cannot describe a face
@@ -143,6 +143,8 @@ class SourceTopology:
     ops: the operators of the reference's canonical mesh; ops_t: the same on the device.
     neutral: for an entry of a source neutral, (its proxy's canonical vertices (V',3) float32, their
     unit normals (V',3) float64) -- the reference of the neutral channels, made on first use.
+    rest: for an entry of a source neutral, the indices of its rest vertices
+    (``Retargeter.rest_vertices``), made on first use.
     """
 
     faces: np.ndarray
@@ -152,6 +154,7 @@ class SourceTopology:
     ops_t: TorchOperators
     neutral: tuple[np.ndarray, np.ndarray] | None = None
     face: np.ndarray | None = None
+    rest: np.ndarray | None = None
 
     def proxy(self, mesh: Mesh) -> Mesh:
         """The mesh the encoder sees for a frame of this topology: the frame's face, or its proxy
@@ -713,13 +716,33 @@ class Retargeter:
                                                     self.REFINE_FREE_PRIOR)
         return self._source_rigs[key]
 
+    def rest_vertices(self, source_neutral: Mesh) -> np.ndarray:
+        """The indices (R,) int64 of a source neutral's rest vertices, on which its frames' head
+        motion is fitted (``stabilise_frames``): those of its face the source's own rig moves
+        least (``SourceRig.rest``). A neutral above ``proxy_vertices`` is not baked whole for this:
+        the rig of its proxy is, and every vertex of the proxy's rest clusters is a rest vertex (at
+        most ``MAX_REST``, evenly spaced). Kept with the neutral's source topology."""
+        neutral = as_mesh(source_neutral, role="source neutral")
+        if neutral.n_vertices <= self.proxy_vertices:        # encoded whole: its own rig's
+            return self.source_rig(neutral).rest
+        src = self.source_topology(neutral, neutral=True)
+        if src.rest is None:
+            if src.cluster is None:
+                src.rest = self.source_rig(neutral).rest
+            else:
+                members = np.flatnonzero(np.isin(src.cluster, self.source_rig(src.proxy(neutral)).rest))
+                members = members[np.unique(np.linspace(0, len(members) - 1, min(len(members), MAX_REST))
+                                            .round().astype(np.int64))]
+                src.rest = members if src.face is None else src.face[members]
+        return src.rest
+
     def stabilise_frames(self, frames, source_neutral: Mesh) -> tuple[list[Mesh], list[RigidMotion]]:
         """The frames with their head motion against ``source_neutral`` removed, and that motion
         (``retarget.stabilise``): for each frame the rigid motion carrying the neutral onto it on
         the neutral's rest vertices, those the source's own rig (``source_rig``, baked once per
-        neutral) moves least, is fitted robustly and undone. Without a neutral mesh, ``encode``
-        and ``estimate_neutral`` pass a take's first frame as ``source_neutral`` (its rig baked as
-        if it were the neutral). A frame that does not move
+        neutral) moves least (``rest_vertices``), is fitted robustly and undone. Without a neutral
+        mesh, ``encode`` and ``estimate_neutral`` pass a take's first frame as ``source_neutral``
+        (its rig baked as if it were the neutral). A frame that does not move
         (``RigidMotion.still``) is returned as it is. frames: a Mesh or a list sharing the
         neutral's topology -> (list of Meshes in the neutral's frame, list of ``RigidMotion``).
         RetargetError naming the frame when its vertex count differs from the neutral's, or when
@@ -732,7 +755,7 @@ class Retargeter:
             if f.n_vertices != neutral.n_vertices:
                 raise RetargetError(f"{f.name or f'source frame {i}'}: {f.n_vertices} vertices, but "
                                     f"{name} has {neutral.n_vertices}; they must share a topology")
-        rest = self.source_rig(neutral).rest
+        rest = self.rest_vertices(neutral)
         out, motions = [], []
         for i, f in enumerate(frames):
             m = rigid_fit(f.vertices, neutral.vertices, rest)

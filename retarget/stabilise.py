@@ -21,6 +21,7 @@ import numpy as np
 
 REST_SHARE = 0.05         # share of a head's vertices, the least moved by its rig, that fit the motion
 MIN_REST = 100            # ... but at least this many
+MAX_REST = 5000           # and of a large mesh's (``Retargeter.rest_vertices``) at most this many
 TUKEY_C = 4.685           # Tukey's biweight constant, in robust standard deviations
 SIGMA_FLOOR = 1e-4        # robust scale floor, relative to the neutral's bounding-box diagonal
 ITERATIONS = 10

@@ -187,3 +187,22 @@ def test_cli_removes_reports_and_on_request_carries_the_head_motion(tmp_path, ri
     assert main(["invert", str(tmp_path / "take"), "-o", str(tmp_path / "w.csv"),
                  "--head-poses", str(tmp_path / "w.csv"), "--checkpoint", str(ckpt)]) == 2
     assert "--head-poses and -o name the same file" in capsys.readouterr().err
+
+
+def test_a_large_neutral_takes_its_rest_vertices_from_its_proxy(rig):
+    torch.manual_seed(0)
+    r = Retargeter(NFSModel(NFSConfig.preset("tiny", neutral_channels=True)), device="cpu",
+                   proxy_vertices=400)                       # the 1,500-vertex rig is "large"
+    neutral = Mesh(rig.neutral, rig.faces, "neutral")
+    rest = r.rest_vertices(neutral)
+    src = r.source_topology(neutral, neutral=True)
+    assert src.cluster is not None and src.rest is rest      # made once, kept with the neutral
+    proxy_rest = r.source_rig(src.proxy(neutral)).rest       # the proxy's rig, not the whole mesh's
+    assert set(src.cluster[rest]) <= set(proxy_rest.tolist())
+    assert len(rest) == np.isin(src.cluster, proxy_rest).sum()
+    assert not any(s.baked.deltas.shape[1] == len(rig.neutral) for s in r._source_rigs.values())
+    frames = off_rest(rig, rest, 1, seed=8)
+    turned, q = moved(frames[0].vertices, 9.0, [0.3, 1, 0.1], [0.2, 0.4, 0.1])
+    out, motions = r.stabilise_frames([Mesh(turned, rig.faces)], neutral)
+    np.testing.assert_allclose(motions[0].rotation, q, atol=1e-6)
+    np.testing.assert_allclose(out[0].vertices, frames[0].vertices, atol=1e-5)
