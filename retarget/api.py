@@ -30,6 +30,7 @@ from __future__ import annotations
 import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from functools import cached_property
 from importlib import resources
 from pathlib import Path
 
@@ -227,6 +228,20 @@ def _ridge_factor(gram: np.ndarray, prior: float) -> tuple[np.ndarray, float]:
     return np.linalg.cholesky(gram + ridge * np.eye(len(gram))).T, ridge
 
 
+def box_least_squares(chol: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """argmin over w in [0,1]^K of wᵀRᵀRw − 2hᵀw (R = chol (K,K) upper-triangular, h (K,) float64):
+    the unconstrained minimiser when it lies in the box, else BVLS on R w ≈ R⁻ᵀ h -> (K,) float64
+    (``SourceRig.fit``; ``retarget.oracle.fit_rig_weights``)."""
+    from scipy.linalg import solve_triangular
+    from scipy.optimize import lsq_linear
+
+    rhs = solve_triangular(chol, h, trans="T")
+    w = solve_triangular(chol, rhs)
+    if w.min() < 0.0 or w.max() > 1.0:
+        w = lsq_linear(chol, rhs, bounds=(0.0, 1.0), method="bvls").x
+    return np.clip(w, 0.0, 1.0)                              # BVLS may overstep a bound by 1 ulp
+
+
 def _gram(a: np.ndarray) -> np.ndarray:
     """AᵀA (K,K) float64 of the rows Aᵀ (K, n)."""
     return a.astype(np.float64) @ a.T.astype(np.float64)
@@ -274,9 +289,9 @@ class SourceRig:
     target: the source neutral prepared as a target; baked: its 53 decoded one-hot shapes (source
     units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; gram: AᵀA (53,53) float64, whose
     ridge factors (one per prior, the pull towards the encoder's estimate) are made when first
-    used (factors); rest: the indices of the face's vertices the baked shapes move least
-    (``retarget.stabilise.rest_vertices``, in the mesh's indexing), on which a frame's head
-    motion is fitted (``Retargeter.stabilise_frames``). With the basis decoder also free_basis:
+    used (factors); rest (made on first use): the indices of the face's vertices the baked shapes
+    move least (``retarget.stabilise.rest_vertices``, in the mesh's indexing), on which a frame's
+    head motion is fitted (``Retargeter.stabilise_frames``). With the basis decoder also free_basis:
     F (code_dim − 53, 3V) float32, the rig's columns of the free dims of z_GE (source units),
     and its factor free_chol with ridge free_ridge (``fit_free``, prior ``free_prior``); None for
     the MLP decoder. Made once per neutral.
@@ -290,16 +305,22 @@ class SourceRig:
     free_chol: np.ndarray | None = None
     free_ridge: float = 0.0
     factors: dict = field(default_factory=dict)
-    rest: np.ndarray | None = None
+
+    @cached_property
+    def rest(self) -> np.ndarray:
+        """The rest vertices (R,) int64 of the baked shapes on the face (module docstring of
+        ``retarget.stabilise``), made on first use: a rig baked for refine alone never needs them."""
+        face = None if self.target is None else self.target.face
+        if face is None:
+            return rest_vertices(self.baked.deltas)
+        return face[rest_vertices(self.baked.deltas[:, face])]
 
     @classmethod
     def make(cls, target: Target, baked: BakedRig, free: np.ndarray | None = None,
              free_prior: float = 1e-3) -> "SourceRig":
         """free: (code_dim − 53, V, 3) the basis decoder's shapes of the free dims in source units."""
         a = np.ascontiguousarray(baked.deltas.reshape(N_FACS, -1), np.float32)   # Aᵀ (53, 3V)
-        face = None if target is None else target.face       # rest vertices on the face only
-        rest = rest_vertices(baked.deltas) if face is None else face[rest_vertices(baked.deltas[:, face])]
-        rig = cls(target, baked, a, _gram(a), rest=rest)
+        rig = cls(target, baked, a, _gram(a))
         if free is not None:
             rig.free_basis = np.ascontiguousarray(free.reshape(len(free), -1), np.float32)
             rig.free_chol, rig.free_ridge = _ridge_factor(_gram(rig.free_basis), free_prior)
@@ -375,16 +396,9 @@ class SourceRig:
         h (53,) float64, μ = sparsity · mean diag(AᵀA), sparsity a float or one per weight (53,)):
         the unconstrained minimiser when it lies in the box, else BVLS on R w ≈ R⁻ᵀ h -> (53,)
         float32."""
-        from scipy.linalg import solve_triangular
-        from scipy.optimize import lsq_linear
-
         if np.any(np.asarray(sparsity) > 0.0):
             h = h - 0.5 * np.asarray(sparsity, np.float64) * float(np.trace(self.gram)) / len(self.gram)
-        rhs = solve_triangular(chol, h, trans="T")
-        w = solve_triangular(chol, rhs)
-        if w.min() < 0.0 or w.max() > 1.0:
-            w = lsq_linear(chol, rhs, bounds=(0.0, 1.0), method="bvls").x
-        return np.clip(w, 0.0, 1.0).astype(np.float32)       # BVLS may overstep a bound by 1 ulp
+        return box_least_squares(chol, h).astype(np.float32)
 
 
 class Retargeter:

@@ -159,28 +159,17 @@ def closest_point_rig(template_neutral: np.ndarray, template_faces: np.ndarray,
 def fit_rig_weights(deltas: np.ndarray, neutral: np.ndarray, frames: np.ndarray) -> np.ndarray:
     """Inverse rigging on a known rig, the plain way: the weights w in [0,1] minimising
     |neutral + Σ_k w_k deltas_k − frame|² for each frame, by bounded least squares
-    (``scipy.optimize.lsq_linear``, BVLS) on the K×K reduced system, with a ridge of 1e-9 of the
+    (``retarget.api.box_least_squares``) on the K×K reduced system, with a ridge of 1e-9 of the
     Gram matrix's mean diagonal only to keep it positive definite.
 
     deltas (K,V,3), neutral (V,3), frames (T,V,3) or (V,3), one unit. Returns (T,K) or (K,) float64."""
-    from scipy.linalg import cho_factor, cho_solve, solve_triangular
-    from scipy.optimize import lsq_linear
+    from .api import _gram, _ridge_factor, box_least_squares
 
     a = np.asarray(deltas, np.float64).reshape(len(deltas), -1)              # (K, 3V)
     frames = np.asarray(frames, np.float64)
     single = frames.ndim == 2
     b = (frames.reshape(-1, *np.shape(neutral)) - np.asarray(neutral, np.float64)).reshape(
         -1, a.shape[1])                                                       # (T, 3V)
-    gram = a @ a.T
-    gram += 1e-9 * np.trace(gram) / len(gram) * np.eye(len(gram))
-    factor = cho_factor(gram, lower=False)
-    chol = np.triu(factor[0])
-    out = []
-    for h in b @ a.T:
-        w = cho_solve(factor, h)
-        if w.min() < 0 or w.max() > 1:
-            w = lsq_linear(chol, solve_triangular(chol, h, trans="T"), bounds=(0, 1),
-                           method="bvls").x
-        out.append(np.clip(w, 0.0, 1.0))
-    out = np.array(out)
+    chol, _ = _ridge_factor(_gram(a), 1e-9)
+    out = np.array([box_least_squares(chol, h) for h in b @ a.T])
     return out[0] if single else out

@@ -53,15 +53,18 @@ class RigidMotion:
         return (np.asarray(vertices, np.float64) - self.translation) @ self.rotation
 
     def angle_degrees(self) -> float:
-        """The rotation's angle (degrees)."""
-        cos = (np.trace(self.rotation) - 1.0) / 2.0
-        return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+        """The rotation's angle (degrees; ``retarget.canonical.rotation_angle``)."""
+        from .canonical import rotation_angle
+
+        return rotation_angle(self.rotation)
 
 
 def rest_vertices(deltas: np.ndarray) -> np.ndarray:
     """The rest vertices of a rig: indices (R,) int64 of the ``REST_SHARE`` of vertices (at least
     ``MIN_REST``) with the least squared motion summed over its shapes; deltas (K,V,3)."""
-    q = np.square(np.asarray(deltas, np.float64)).sum(axis=(0, 2))
+    q = np.zeros(np.shape(deltas)[1])
+    for d in deltas:                     # a shape at a time: no float64 copy of the whole rig
+        q += np.square(np.asarray(d, np.float64)).sum(axis=1)
     n = min(len(q), max(MIN_REST, int(round(REST_SHARE * len(q)))))
     return np.sort(np.argsort(q, kind="stable")[:n])
 

@@ -190,8 +190,9 @@ def print_notes(r, target=None, target_name: str = "", frames=None, neutral=None
     if frames is not None and r.stabilise and (neutral is not None or len(frames) > 1):
         moving = [m for m in r.stabilise_frames(frames, neutral or frames[0])[1] if not m.still]
         if moving:
+            against = "neutral" if neutral is not None else "first frame"
             print(f"source: {len(moving)} of {len(frames)} frame(s) move as a whole against the "
-                  f"{'neutral' if neutral is not None else 'first frame'} (turned up to {max(m.angle_degrees() for m in moving):.1f} degrees, "
+                  f"{against} (turned up to {max(m.angle_degrees() for m in moving):.1f} degrees, "
                   f"vertices carried up to {100 * max(m.moved for m in moving):.1f} % of the head's "
                   "size); that head motion was removed before reading the expressions "
                   "(--no-stabilise: keep it)", file=sys.stderr)
