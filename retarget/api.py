@@ -46,6 +46,7 @@ from .checkpoint import checkpoint_code_map, load_checkpoint, model_from_checkpo
 from .code_map import check_code_map, check_gate, head_code_map
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
+from .jaw import SHAPES as JAW_SHAPES, JawParts, find_jaw_parts
 from .mesh import Mesh, as_mesh, face_part, is_mesh_like, submesh
 from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh, vertex_features
 from .smoothing import smooth_codes
@@ -88,7 +89,8 @@ class Target:
     place. proxy: the prepared (canonical) mesh the encoders ran on — the face, or its decimated
     proxy for large meshes. feat: (V',6) float32 canonical features of every vertex of the face
     (V' = V without parts). c: (128,) image code; codes: z_ID and skinning weights (ω_Skin per
-    vertex of the face).
+    vertex of the face). jaw: the parts its jaw carries (``Retargeter.jaw_parts``, found on first
+    use; ``jaw_found`` says whether it was looked for).
     """
 
     mesh: Mesh
@@ -97,6 +99,8 @@ class Target:
     c: torch.Tensor
     codes: TargetCodes
     face: np.ndarray | None = None
+    jaw: JawParts | None = None
+    jaw_found: bool = False
 
     @property
     def n_vertices(self) -> int:
@@ -411,7 +415,9 @@ class Retargeter:
     results back (``canonicaliser``; False: every mesh as it faces). face_only: for a mesh with
     separate parts (eyeballs, teeth, a tongue, lashes beside the skin), the network sees the
     face alone (``retarget.mesh.face_part``: the part with the most vertices) and the other parts
-    keep their place in every result (False: the whole mesh is the face). stabilise: remove each
+    keep their place in every result (False: the whole mesh is the face), but for those of a
+    target that its jaw carries (lower teeth, a tongue: ``jaw_parts``) with ``carry_jaw`` (False:
+    every part stays at rest). stabilise: remove each
     source frame's head motion against the source's neutral (without one, against a take's first
     frame) before the frame is read (``stabilise_frames``; False: frames are taken as they are).
     """
@@ -452,7 +458,7 @@ class Retargeter:
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
                  refine_steps: int = 0, code_map: np.ndarray | None = None,
                  code_map_gate: np.ndarray | None = None, upright: bool = True,
-                 face_only: bool = True, stabilise: bool = True):
+                 face_only: bool = True, stabilise: bool = True, carry_jaw: bool = True):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
@@ -469,6 +475,7 @@ class Retargeter:
         self.upright = upright             # turn tilted heads upright first (``canonicaliser``)
         self.face_only = face_only         # the network sees a mesh's face part alone
         self.stabilise = stabilise         # source frames' head motion removed (``stabilise_frames``)
+        self.carry_jaw = carry_jaw         # a target's lower teeth and tongue follow its jaw (``jaw_parts``)
 
     @property
     def code_map(self) -> np.ndarray | None:
@@ -726,7 +733,7 @@ class Retargeter:
                 self._source_rigs.pop(next(iter(self._source_rigs)))
             free = (basis_shapes(target, slice(N_FACS, None))   # the basis decoder: the free
                     if target.codes.basis is not None else None)  # dims' shapes too
-            self._source_rigs[key] = SourceRig.make(target, self.bake(target), free,
+            self._source_rigs[key] = SourceRig.make(target, self.bake(target, parts=False), free,
                                                     self.REFINE_FREE_PRIOR)
         return self._source_rigs[key]
 
@@ -875,7 +882,7 @@ class Retargeter:
         rig = self._source_rigs.get(_rig_key(neutral))
         target = rig.target if rig is not None else self.prepare(neutral)   # refine's, if made
         z = np.asarray(codes, np.float32).reshape(len(frames), self.cfg.code_dim)
-        return _residual_rms(frames, self.iter_decode(target, z), target.mesh.vertices)
+        return _residual_rms(frames, self._iter_decode_face(target, z), target.mesh.vertices)
 
     def estimate_neutral(self, frames, max_frames: int | None = None) -> Mesh:
         """The performer's neutral estimated from a take alone, for a source without its neutral
@@ -900,7 +907,7 @@ class Retargeter:
         first = picked[0]
         identity = self.prepare(first)
         readings = np.empty((len(picked),) + first.vertices.shape, np.float32)
-        for i, (frame, decoded) in enumerate(zip(picked, self.iter_decode(identity, z))):
+        for i, (frame, decoded) in enumerate(zip(picked, self._iter_decode_face(identity, z))):
             readings[i] = frame.vertices - (decoded - first.vertices)   # f_t − D(f_1, z_t)
         return Mesh(np.median(readings, axis=0).astype(np.float64), first.faces, "estimated neutral")
 
@@ -939,10 +946,17 @@ class Retargeter:
 
     def iter_decode(self, target, z_ge, progress: bool = False):
         """Yield the target's vertices (V,3) float64 for each code of z_GE (T,128), one frame at a
-        time: the memory of one frame whatever T (a 1M-vertex frame is 24 MB)."""
+        time: the memory of one frame whatever T (a 1M-vertex frame is 24 MB). A target's parts
+        that its jaw carries (``jaw_parts``) move with its chin; its other parts stay at rest."""
+        target = self.prepare(target)
+        jaw = self.jaw_parts(target)
+        for frame in self._iter_decode_face(target, z_ge, progress):
+            yield frame if jaw is None else jaw.carry(frame)
+
+    def _iter_decode_face(self, target: Target, z_ge, progress: bool = False):
+        """``iter_decode`` with every part beside the face at rest (the decoder's output alone)."""
         from tqdm import tqdm
 
-        target = self.prepare(target)
         z = torch.as_tensor(np.asarray(z_ge, np.float32), device=self.device)
         if z.dim() != 2:
             raise RetargetError(f"iter_decode: codes must be (T, {z.shape[-1]}), got {tuple(z.shape)}")
@@ -1006,15 +1020,44 @@ class Retargeter:
             return weight_codes(weights)
         return (weights_array(weights) @ self.head_code_map(self.prepare(target)).T).astype(np.float32)
 
-    def bake(self, target) -> BakedRig:
+    def bake(self, target, parts: bool = True) -> BakedRig:
         """Decode the 53 one-hot expressions once: a linear blendshape rig for the target. With the
-        basis decoder it is the decoder's own rig, ``codes.basis`` (exact for FACS-weight codes)."""
+        basis decoder it is the decoder's own rig, ``codes.basis`` (exact for FACS-weight codes).
+        Each shape moves the parts the target's jaw carries (``jaw_parts``) as it moves the chin;
+        ``parts=False``: every part beside the face at rest (the rig that refine fits)."""
         target = self.prepare(target)
+        rig = self._bake_face(target)
+        jaw = self.jaw_parts(target) if parts else None
+        return rig if jaw is None else BakedRig(rig.neutral, jaw.carry_shapes(rig.deltas))
+
+    def _bake_face(self, target: Target, names=None) -> BakedRig:
+        """``bake`` with every part beside the face at rest, of the FACS shapes ``names`` (default
+        all 53, in ICT order)."""
+        idx = np.arange(N_FACS) if names is None else np.array([FACS_INDEX[n] for n in names])
         if target.codes.basis is not None:
-            return BakedRig(target.mesh.vertices.astype(np.float32),
-                            basis_shapes(target, slice(0, N_FACS), self.head_code_map(target)))
-        shapes = self.animate(target, np.vstack([np.zeros(N_FACS), np.eye(N_FACS)]).astype(np.float32))
+            cmap = self.head_code_map(target)
+            shapes = (basis_shapes(target, slice(0, N_FACS)) if cmap is None and names is None else
+                      basis_shapes(target, None, (cmap if cmap is not None else
+                                                  np.eye(self.cfg.code_dim, dtype=np.float32))[:, idx]))
+            return BakedRig(target.mesh.vertices.astype(np.float32), shapes)
+        onehot = np.zeros((len(idx) + 1, N_FACS), np.float32)
+        onehot[np.arange(1, len(idx) + 1), idx] = 1.0
+        shapes = np.stack(list(self._iter_decode_face(target, self.weight_codes(onehot, target))))
         return BakedRig(shapes[0].astype(np.float32), (shapes[1:] - shapes[0]).astype(np.float32))
+
+    def jaw_parts(self, target) -> JawParts | None:
+        """The parts beside a target's face that its jaw carries (lower teeth, a tongue;
+        ``retarget.jaw``), found once per target from its own baked jaw and mouth shapes; None
+        for a mesh of one part, without ``carry_jaw``, or when no part lies below the mouth."""
+        target = self.prepare(target)
+        if target.face is None or not self.carry_jaw:
+            return None
+        if not target.jaw_found:
+            shapes = target.on_face(np.moveaxis(self._bake_face(target, JAW_SHAPES).deltas, 0, 1))
+            target.jaw = find_jaw_parts(target.mesh.vertices, target.mesh.faces, target.face,
+                                        np.moveaxis(shapes, 1, 0), target.proxy.canon.to_canonical)
+            target.jaw_found = True
+        return target.jaw
 
 
 def weight_codes(weights) -> np.ndarray:

@@ -18,7 +18,8 @@ from ..smoothing import FILTERS
 from ..usd import USD_FORMATS
 
 
-def add_model_args(p) -> None:
+def add_model_args(p, target: bool = True) -> None:
+    """The model's options; ``target``: the command writes results on a target mesh."""
     p.add_argument("--checkpoint", help="model checkpoint (default: the bundled one)")
     p.add_argument("--device", help="cpu or cuda (default: cuda when present)")
     p.add_argument("--up", help="up axis of the input files, e.g. +z (default +y)")
@@ -35,6 +36,11 @@ def add_model_args(p) -> None:
                    help="the whole mesh is the face: do not leave separate parts (eyes, teeth, a "
                         "tongue, lashes: every part but the one with the most vertices) out of the "
                         "network (docs/RESULTS.md, \"Heads with eyes and teeth\")")
+    if not target:
+        return
+    p.add_argument("--still-parts", action="store_true",
+                   help="leave every separate part of a target at rest: do not move its lower teeth "
+                        "and tongue (the parts below the mouth corners) with its jaw")
 
 
 def add_neutral_args(p) -> None:
@@ -171,8 +177,13 @@ def print_notes(r, target=None, target_name: str = "", frames=None, neutral=None
 
     heads = []
     if target is not None:
-        heads.append((target_name, target.proxy.canon, target.face, target.n_vertices,
-                      "keep their place in the results"))
+        jaw = r.jaw_parts(target)
+        parts = "keep their place in the results"
+        if jaw is not None:
+            parts = (f"keep their place in the results, but for {len(jaw.carried):,} vertices in "
+                     f"{jaw.parts} part(s) below the mouth (lower teeth, tongue), which move with "
+                     "the jaw (--still-parts: keep them at rest too)")
+        heads.append((target_name, target.proxy.canon, target.face, target.n_vertices, parts))
     if frames is not None:
         ref = neutral if neutral is not None else frames[0]
         src = r.source_topology(ref, neutral=neutral is not None)
@@ -242,6 +253,7 @@ def retargeter(args):
                            refine_steps=getattr(args, "refine_steps", 0),
                            upright=not getattr(args, "no_upright", False),
                            face_only=not getattr(args, "all_parts", False),
+                           carry_jaw=not getattr(args, "still_parts", False),
                            stabilise=not getattr(args, "no_stabilise", False), **extra)
 
 

@@ -26,7 +26,7 @@ def add_arguments(p):
                         "in the frames' units, frame = neutral rotated, then moved")
     add_neutral_args(p)
     add_smooth_arg(p)
-    add_model_args(p)
+    add_model_args(p, target=False)
 
 
 def run(args) -> int:

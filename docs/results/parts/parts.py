@@ -68,6 +68,19 @@ def landmarks(base_neutral: np.ndarray):
     return out
 
 
+def test_heads(w53: np.ndarray):
+    """Yield (seed, base rig, rig, weights) for each of the ``HEADS`` realistic test heads: the
+    identity's base rig (ARKit shapes as authored), its head-and-neck rig decimated to 4,000
+    vertices, and ``w53`` (T,53) with the shapes that rig lacks set to 0."""
+    for s in HEADS:
+        base = base_head_rig(sample_head_identity(s, "test"), "arkit")
+        rig = build_head_rig(base, head_tessellation(seed=s, n_vertices=4000, kind="decimated",
+                                                     crop="head_neck"), 20)
+        w = w53.copy()
+        w[:, ~rig.present] = 0.0
+        yield s, base, rig, w
+
+
 def add(neutral: np.ndarray, faces: np.ndarray, parts) -> Mesh:
     pv, pf = parts
     return Mesh(np.concatenate([neutral, pv]), np.concatenate([faces, pf + len(neutral)]))
@@ -81,13 +94,7 @@ def run():
     src = real.evaluate(a)                                            # (T, V, 3) skin frames
     arkit_parts = parts_at(EYE, EYE * [-1, 1, 1], MOUTH)
     cases = [("self: ARKit head", real.neutral, real.faces, src, arkit_parts)]
-    for s in HEADS:
-        ident = sample_head_identity(s, "test")
-        base = base_head_rig(ident, "arkit")
-        rig = build_head_rig(base, head_tessellation(seed=s, n_vertices=4000, kind="decimated",
-                                                     crop="head_neck"), 20)
-        w = w53.copy()
-        w[:, ~rig.present] = 0.0
+    for s, base, rig, w in test_heads(w53):
         cases.append((f"cross: test head {s}", rig.neutral, rig.faces, rig.evaluate(w),
                       parts_at(*landmarks(base.neutral))))
     src_neutral = add(real.neutral, real.faces, arkit_parts)
