@@ -211,6 +211,38 @@ def rig_loss(model, feat: torch.Tensor, c: torch.Tensor, codes, basis: torch.Ten
     return (err * mean / (size + relative * mean + 1e-12)).mean()
 
 
+def solve_loss(model, feat: torch.Tensor, c: torch.Tensor, codes, basis: torch.Tensor,
+               weights: torch.Tensor, rows: torch.Tensor | None = None,
+               ridge: float = 0.01) -> torch.Tensor:
+    """L_solve = mean |ŵ − w|: the weights that inverse rigging on the decoder's baked rig would
+    return for frames of the target's true rig (beyond the paper). A (53, 3n) holds the decoder's
+    one-hot shapes D(Ψ([e_k, 0])) on the decoded vertices, x = w B the true frames there, and
+    ŵ = (A Aᵀ + λ m̄ I)⁻¹ A x their ridge least-squares weights (m̄ the mean diagonal of A Aᵀ):
+    invert's fit without its bounds and priors. Where L_rig weighs every error of the baked shapes
+    alike, this weighs those that move the fitted weights: errors of one shape towards another.
+
+    Args:
+        model, feat, c, codes: the target, as for ``rig_loss``.
+        basis: (53, V, 3) the target's true blendshape deltas (units of ``feat``'s positions).
+        weights: (S, 53) the frames' true FACS weights (0 for shapes the rig lacks).
+        rows: (n,) int64 vertices to decode, or None for all.
+        ridge: λ, relative to m̄.
+    Returns:
+        The mean absolute weight error over the S frames and 53 weights (weight units).
+    """
+    from .model import weights_to_code
+
+    n = basis.shape[0]
+    z = weights_to_code(torch.eye(n, dtype=basis.dtype, device=basis.device), model.cfg.code_dim)
+    a = model.decode_target(feat, c, codes, z, rows).reshape(n, -1)                 # (53, 3n)
+    sub = basis if rows is None else basis[:, rows]
+    x = weights @ sub.reshape(n, -1)                                                # (S, 3n)
+    gram = a @ a.T
+    lam = ridge * torch.diagonal(gram).mean().detach() + 1e-12
+    w_hat = torch.linalg.solve(gram + lam * torch.eye(n, dtype=a.dtype, device=a.device), a @ x.T).T
+    return (w_hat - weights).abs().mean()
+
+
 #: Canonical units that a skinning descriptor channel's range (0, 1) spans in L_corr: the base
 #: bust in its face frame spans x ±23, y −32..15, z ±10 (the head alone ±8), all well inside it.
 TEMPLATE_SPAN = 72.0

@@ -64,7 +64,10 @@ DEFAULTS = {
              # L_rig relative to each shape's size (nets.losses.rig_loss's τ; 0 = plain)
              "rig_relative": 0.0,
              # L_corr: skinning descriptor channels 0-2 as template positions (realistic heads)
-             "corr": 0.0},
+             "corr": 0.0,
+             # L_solve: inverse rigging's weights on the decoder's baked rig (nets.losses.solve_loss)
+             # for solve_frames frames of the eval's mixed weights a head, ridge solve_ridge
+             "solve": 0.0, "solve_frames": 16, "solve_ridge": 0.01},
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
     # the code map fitted into model.pt at export (retarget.code_map; basis decoder): this many
     # MakeHuman and as many procedural training identities from seed ``seed``; 0 = none. gated:
@@ -239,7 +242,7 @@ def free_dims_dropout(z_ge: torch.Tensor, n_facs: int, p: float, rng: np.random.
 
 #: The encoder and segmentation terms added to L_dec, in this order, with their config weights.
 LOSS_WEIGHTS = (("L_ID", "id"), ("L_Exp", "exp"), ("L_BP", "bp"), ("L_BR", "br"), ("L_nll", "nll"),
-                ("L_rig", "rig"), ("L_corr", "corr"))
+                ("L_rig", "rig"), ("L_corr", "corr"), ("L_solve", "solve"))
 
 #: Shapes per step that L_rig decodes with the MLP decoder (one decoder pass each); the basis
 #: decoder's rig holds all 53 at no extra cost.
@@ -267,6 +270,20 @@ def extra_rig_loss(model: NFSModel, entry, loss_cfg: dict, n_faces: int,
     shapes = rig_shapes(model, entry.present, rng).to(device)
     return L.rig_loss(model, feat, c, codes, torch.from_numpy(entry.basis).to(device), rows, shapes,
                       loss_cfg["rig_relative"])
+
+
+def solve_term(model: NFSModel, feat, c, codes, basis: torch.Tensor, present, rows,
+               loss_cfg: dict, rng: np.random.Generator) -> torch.Tensor:
+    """L_solve (``nets.losses.solve_loss``) on ``loss_cfg["solve_frames"]`` frames of the eval's
+    mixed weights (``data_synth.sampling.sample_weights``), the shapes the rig lacks (``present``
+    False) at 0."""
+    from data_synth.sampling import sample_weights
+
+    w = sample_weights(rng, int(loss_cfg["solve_frames"]), mode="mixed")
+    if present is not None:
+        w[:, ~np.asarray(present, bool)] = 0.0
+    w = torch.from_numpy(w.astype(np.float32)).to(basis.device)
+    return L.solve_loss(model, feat, c, codes, basis, w, rows, float(loss_cfg["solve_ridge"]))
 
 
 def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
@@ -321,6 +338,8 @@ def group_losses(model: NFSModel, group: Group, loss_cfg: dict, n_faces: int,
         rig = [L.rig_loss(model, t_feat, c_t, codes, basis_t, rows, shapes, loss_cfg["rig_relative"])]
         rig += [extra_rig_loss(model, e, loss_cfg, n_faces, rng, device) for e in group.rig_targets]
         out["L_rig"] = torch.stack(rig).mean()   # the mean over the step's heads
+    if loss_cfg["solve"] > 0:
+        out["L_solve"] = solve_term(model, t_feat, c_t, codes, basis_t, tgt.present, rows, loss_cfg, rng)
     n_seg = model.cfg.n_segments
     if loss_cfg["corr"] > 0 and model.cfg.skin_descriptor >= 3 and tgt.template is not None:
         out["L_corr"] = L.correspondence_loss(codes.z_skin[:, n_seg:n_seg + 3],
@@ -376,7 +395,7 @@ def learning_rate(progress: float, step: int, optim_cfg: dict) -> float:
 
 
 LOG_COLUMNS = ("step", "elapsed_s", "lr", "samples_per_s", "total", "L_dec", "L_v", "L_n", "L_g",
-               "L_ID", "L_Exp", "L_BP", "L_BR", "L_nll", "L_rig", "L_corr", "val_mse_mm2",
+               "L_ID", "L_Exp", "L_BP", "L_BR", "L_nll", "L_rig", "L_corr", "L_solve", "val_mse_mm2",
                "val_seg_mse_mm2",
                "val_weight_mae")
 

@@ -241,3 +241,37 @@ def test_rig_loss_is_zero_on_the_decoders_own_one_hot_shapes_and_trains_the_deco
     grads = _grads(model, losses.rig_loss(model, mesh["feat"], c, codes, 0.1 * other), "")
     assert all(g is None for n, g in grads.items() if n.startswith("expression_encoder"))
     assert any(g is not None and g.abs().sum() > 0 for n, g in grads.items() if n.startswith("decoder"))
+
+
+def test_solve_loss_is_the_ridge_weights_error_on_the_decoders_own_rig_and_trains_the_decoder():
+    """On the decoder's own one-hot shapes the ridge solve gives the weights back (up to its
+    shrinkage, which vanishes with λ); a rig whose shape 7 is drawn as shape 9 costs the weights
+    of both; the loss reaches the decoder. The decoder: a linear rig of 200 random vertices."""
+
+    class Rig(torch.nn.Module):
+        cfg = type("C", (), {"code_dim": 60})()
+
+        def __init__(self):
+            super().__init__()
+            self.decoder = torch.nn.Parameter(torch.randn(60, 200, 3, generator=torch.Generator().manual_seed(1)))
+
+        def decode_target(self, feat, c, codes, z, rows=None):
+            shapes = self.decoder if rows is None else self.decoder[:, rows]
+            return torch.einsum("sk,kvd->svd", z, shapes)
+
+    model = Rig()
+    own = model.decoder[:53].detach().clone()
+    w = torch.rand(4, 53, generator=torch.Generator().manual_seed(0))
+    exact = losses.solve_loss(model, None, None, None, own, w, ridge=1e-9)
+    assert exact < 1e-4
+    assert losses.solve_loss(model, None, None, None, own, w, ridge=0.1) > 10 * exact
+    swapped = own.clone()
+    swapped[7] = own[9]                                   # the true rig's shape 7 is the decoder's 9
+    off = losses.solve_loss(model, None, None, None, swapped, w, ridge=1e-9)
+    # frames w B draw 9 with w_7 + w_9 and 7 not at all: those two weights are off by w_7 each
+    torch.testing.assert_close(off, 2 * w[:, 7].mean() / 53, rtol=1e-3, atol=1e-5)
+    rows = torch.arange(0, 200, 2)
+    assert losses.solve_loss(model, None, None, None, own, w, rows, ridge=1e-9) < 1e-4
+    loss = losses.solve_loss(model, None, None, None, swapped, w)
+    loss.backward()
+    assert model.decoder.grad[:53].abs().sum() > 0 and not model.decoder.grad[53:].any()

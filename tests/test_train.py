@@ -257,6 +257,30 @@ def test_rig_loss_term_reaches_the_decoder_and_decodes_the_rigs_shapes_only(tmp_
     assert len(drawn) == RIG_SHAPES_MLP == len(set(drawn.tolist()))
 
 
+def test_solve_term_reaches_the_decoder_and_solves_only_the_rigs_shapes(tmp_path, monkeypatch):
+    import nets.losses as L
+    cfg = tiny_cfg()
+    trainer = Trainer(cfg, tmp_path, progress=False)
+    group = trainer.pool.sample(0)
+    rng = lambda: np.random.default_rng(0)  # noqa: E731
+    assert "L_solve" not in group_losses(trainer.model, group, cfg["loss"], 200, rng(), "cpu")
+    trainer.model.zero_grad()
+    out = group_losses(trainer.model, group, {**cfg["loss"], "solve": 1.0}, 200, rng(), "cpu")
+    out["total"].backward()
+    assert torch.isfinite(out["L_solve"]) and out["L_solve"] > 0
+    assert any(p.grad is not None and p.grad.abs().sum() > 0
+               for n, p in trainer.model.named_parameters() if n.startswith("decoder"))
+    seen = {}
+    monkeypatch.setattr(L, "solve_loss", lambda *a, **k: seen.setdefault("w", a[5]).sum() * 0)
+    from retarget.train import solve_term
+    present = np.zeros(53, bool)
+    present[[0, 5, 9]] = True
+    solve_term(None, None, None, None, torch.zeros(53, 4, 3), present, None,
+               {"solve_frames": 6, "solve_ridge": 0.01}, rng())
+    assert seen["w"].shape == (6, 53) and not seen["w"][:, ~torch.from_numpy(present)].any()
+    assert seen["w"][:, torch.from_numpy(present)].any()
+
+
 def test_rig_targets_add_other_heads_to_l_rig_and_leave_the_rest_of_the_group(tmp_path):
     from retarget.train import extra_rig_loss
     cfg = tiny_cfg()
