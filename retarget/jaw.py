@@ -13,8 +13,9 @@ those parts on a target and moves them with the jaw of each result.
   Tukey's reweighting, so a lip or chin shape on top of the jaw's turn weighs little).
 - The **jaw's parts** (:attr:`JawParts.carried`): every part beside the face whose median height
   in the face's canonical frame (+y up) lies below the mouth corners (where the baked
-  ``mouthSmile_L`` / ``_R`` move the face most) and whose centre lies within ``REACH`` mouth widths
-  of the mouth's centre: lower teeth and a tongue, not eyes, lashes or upper teeth.
+  ``mouthSmile_L`` / ``_R`` move the face most; up to ``LIFT`` mouth widths above them) and whose
+  centre lies within ``REACH`` mouth widths of the mouth's centre: lower teeth and a tongue, not
+  eyes, lashes or upper teeth.
 
 ``Retargeter`` (``jaw_parts``, default on; CLI ``--still-parts`` leaves them at rest) applies the
 jaw's motion to those parts in every decoded frame (``transfer``, ``animate``) and bakes it into
@@ -37,6 +38,8 @@ CHIN_SHARE = 0.5       # ... of which the share least moved by the mouth shapes 
 MIN_CHIN = 12          # ... but at least this many (all candidates when fewer)
 CORNER_VERTICES = 10   # each mouth corner: the mean of the vertices its smile moves most
 REACH = 1.0            # a jaw part's centre lies within this many mouth widths of the mouth's centre
+LIFT = 0.05            # ... and its median height below the corners' + this many mouth widths (chosen
+#                        on validation heads: docs/results/parts/jaw.py)
 JAW = "jawOpen"
 CORNERS = ("mouthSmile_L", "mouthSmile_R")
 MOUTH = tuple(n for n in FACS_NAMES if n.startswith("mouth"))
@@ -123,7 +126,8 @@ def find_jaw_parts(vertices: np.ndarray, faces: np.ndarray, face: np.ndarray, sh
     for label in np.unique(labels[labels >= 0]):
         idx = np.flatnonzero(labels == label)
         c = to_canonical(vertices[idx])
-        if np.median(c[:, 1]) < centre[1] and np.linalg.norm(c.mean(0) - centre) <= REACH * width:
+        if (np.median(c[:, 1]) < centre[1] + LIFT * width
+                and np.linalg.norm(c.mean(0) - centre) <= REACH * width):
             carried.append(idx)
             parts += 1
     if not carried:
