@@ -143,6 +143,7 @@ def run():
     print()
     print(classified("val", list(range(CLASSIFY_HEADS)), LIFTS))
     print(classified("test", list(range(CLASSIFY_HEADS))))
+    print(closed_head())
     print()
     print(cost(cases[0]))
 
@@ -183,6 +184,18 @@ def classified(split: str, seeds, lifts=None) -> str:
                      + (f" (wrong: {'; '.join(wrong)})" if wrong else ""))
     jaw_module.LIFT = kept
     return "\n".join(lines)
+
+
+def closed_head() -> str:
+    """The parts ``jaw_parts`` gives the jaw on the closed MakeHuman head (``full_neutral``: the
+    skin with its mouth cavity and eye sockets, one part) given PARTS."""
+    rig = np.load("../shared/rigs/makehuman_arkit.npz")
+    mesh, idx = assemble(rig["full_neutral"], rig["full_faces"], head_parts(EYE, EYE * [-1, 1, 1], MOUTH))
+    r = Retargeter.load(None)
+    jaw = r.jaw_parts(r.prepare(mesh))
+    given = [p for p in PARTS if jaw is not None and np.isin(idx[p], jaw.carried).all()]
+    return (f"closed MakeHuman head ({len(rig['full_neutral']):,} vertices with its mouth cavity and eye "
+            f"sockets): the jaw given {', '.join(given) or 'nothing'}")
 
 
 def cost(case, repeats: int = 20) -> str:
