@@ -1028,7 +1028,7 @@ class Retargeter:
         target = self.prepare(target)
         rig = self._bake_face(target)
         jaw = self.jaw_parts(target) if parts else None
-        return rig if jaw is None else BakedRig(rig.neutral, jaw.carry_shapes(rig.deltas))
+        return rig if jaw is None else BakedRig(rig.neutral, jaw.carry_shapes(rig.deltas, rig.neutral))
 
     def _bake_face(self, target: Target, names=None) -> BakedRig:
         """``bake`` with every part beside the face at rest, of the FACS shapes ``names`` (default

@@ -76,13 +76,16 @@ class JawParts:
         out[self.carried] = rest @ m.rotation.T + m.translation
         return out
 
-    def carry_shapes(self, deltas: np.ndarray) -> np.ndarray:
+    def carry_shapes(self, deltas: np.ndarray, neutral: np.ndarray | None = None) -> np.ndarray:
         """A baked rig's shapes (K,V,3) (zero on the parts) -> a copy in which each shape moves
-        the jaw's parts as it moves the chin at weight 1 (the linear blendshape of that motion)."""
+        the jaw's parts as it moves the chin at weight 1 (the linear blendshape of that motion).
+        neutral: the rig's neutral (V,3) the shapes add to (default the target's vertices)."""
         out = np.array(deltas, copy=True)
         rest = self.neutral[self.carried]
+        base = self.neutral if neutral is None else np.asarray(neutral, np.float64)
         for k, d in enumerate(out):
-            m = self.motion(self.neutral[self.face] + d[self.face])
+            m = rigid_fit(base[self.face[self.jaw]] + d[self.face[self.jaw]], base[self.face[self.jaw]],
+                          np.arange(len(self.jaw)))
             out[k, self.carried] = rest @ m.rotation.T + m.translation - rest
         return out
 

@@ -78,6 +78,12 @@ def test_the_part_below_the_mouth_is_the_jaws_and_follows_the_chin_exactly(face_
                        atol=1e-9)
     assert np.abs(rig[1, jaw.carried]).max() < 1e-4                    # a smile barely moves the chin
     assert not rig[:, n + 8:].any() and np.array_equal(rig[:, :n], deltas[:, :n])
+    # a rig whose neutral is not the target's (an MLP decoder's output at zero): the motion of its
+    # own chin counts
+    assert np.array_equal(jaw.carry_shapes(deltas, mesh.vertices), rig)
+    raised = mesh.vertices.copy()
+    raised[lower] = turn_x(mesh.vertices[lower], -0.1)
+    assert not np.allclose(jaw.carry_shapes(deltas, raised)[0, jaw.carried], rig[0, jaw.carried], atol=1e-3)
 
 
 def test_no_jaw_part_without_a_part_below_the_mouth_or_a_jaw(face_rig):
