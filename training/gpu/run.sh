@@ -16,8 +16,9 @@ CONFIG=${CONFIG:-realistic_rig_authored}   # the bundled model's config (stage 1
 # fits the gated code map, about a minute, so model.pt comes back with it)
 INIT=${INIT:-retarget/checkpoints/default.pt}   # --init takes the network only, not its map
 LR=${LR:-2e-5}   # stage 19's: fresh schedules from stage 17 at 5e-5 and 1e-4 lost (RESULTS "Stage 18")
-# Judge what comes back on the ARKit rig without the neutral too: 2,500 CPU steps of a fresh 2e-5
-# schedule from stage 19 left it 40 % worse there while level with the neutral (RESULTS "L_solve").
+# Judge what comes back on the ARKit rig without the neutral too: 2,500 CPU steps of a fresh
+# schedule from stage 19 left it 40 % worse there at 2e-5 and 24 % at 5e-6, while level or better
+# with the neutral (RESULTS "L_solve").
 WORKERS=${WORKERS:-14}
 TRAIN_S=${TRAIN_S:-360}
 MEASURE_STEPS=${MEASURE_STEPS:-60}
