@@ -1034,12 +1034,11 @@ class Retargeter:
         """``bake`` with every part beside the face at rest, of the FACS shapes ``names`` (default
         all 53, in ICT order)."""
         idx = np.arange(N_FACS) if names is None else np.array([FACS_INDEX[n] for n in names])
-        if target.codes.basis is not None:
+        if target.codes.basis is not None:            # the code of each shape: [e_k, 0] or M e_k
             cmap = self.head_code_map(target)
-            shapes = (basis_shapes(target, slice(0, N_FACS)) if cmap is None and names is None else
-                      basis_shapes(target, None, (cmap if cmap is not None else
-                                                  np.eye(self.cfg.code_dim, dtype=np.float32))[:, idx]))
-            return BakedRig(target.mesh.vertices.astype(np.float32), shapes)
+            codes = np.eye(self.cfg.code_dim, dtype=np.float32) if cmap is None else cmap
+            return BakedRig(target.mesh.vertices.astype(np.float32),
+                            basis_shapes(target, None, codes[:, idx]))
         onehot = np.zeros((len(idx) + 1, N_FACS), np.float32)
         onehot[np.arange(1, len(idx) + 1), idx] = 1.0
         shapes = np.stack(list(self._iter_decode_face(target, self.weight_codes(onehot, target))))
@@ -1053,9 +1052,9 @@ class Retargeter:
         if target.face is None or not self.carry_jaw:
             return None
         if not target.jaw_found:
-            shapes = target.on_face(np.moveaxis(self._bake_face(target, JAW_SHAPES).deltas, 0, 1))
+            shapes = self._bake_face(target, JAW_SHAPES).deltas[:, target.face]
             target.jaw = find_jaw_parts(target.mesh.vertices, target.mesh.faces, target.face,
-                                        np.moveaxis(shapes, 1, 0), target.proxy.canon.to_canonical)
+                                        shapes, target.proxy.canon.to_canonical)
             target.jaw_found = True
         return target.jaw
 

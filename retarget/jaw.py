@@ -60,12 +60,11 @@ class JawParts:
     carried: np.ndarray
     parts: int
 
-    def motion(self, face_vertices: np.ndarray):
-        """The jaw's rigid motion (``RigidMotion``) from the neutral to a result's face vertices
-        (V',3), fitted on the chin."""
-        neutral = self.neutral[self.face[self.jaw]]
-        return rigid_fit(np.asarray(face_vertices, np.float64)[self.jaw], neutral,
-                         np.arange(len(neutral)))
+    def motion(self, face_vertices: np.ndarray, neutral: np.ndarray | None = None):
+        """The jaw's rigid motion (``RigidMotion``) from the neutral (V,3) (default the target's
+        vertices) to a result's face vertices (V',3), fitted on the chin."""
+        rest = (self.neutral if neutral is None else np.asarray(neutral, np.float64))[self.face[self.jaw]]
+        return rigid_fit(np.asarray(face_vertices, np.float64)[self.jaw], rest, np.arange(len(rest)))
 
     def carry(self, vertices: np.ndarray) -> np.ndarray:
         """A result's vertices (V,3) (its parts at rest) -> a copy with the jaw's parts moved as
@@ -84,8 +83,7 @@ class JawParts:
         rest = self.neutral[self.carried]
         base = self.neutral if neutral is None else np.asarray(neutral, np.float64)
         for k, d in enumerate(out):
-            m = rigid_fit(base[self.face[self.jaw]] + d[self.face[self.jaw]], base[self.face[self.jaw]],
-                          np.arange(len(self.jaw)))
+            m = self.motion(base[self.face] + d[self.face], base)
             out[k, self.carried] = rest @ m.rotation.T + m.translation - rest
         return out
 

@@ -19,8 +19,8 @@ def turn_x(points: np.ndarray, angle: float, hinge=(0.0, -1.0, -8.0)) -> np.ndar
 
 def boxes(centres):
     """Small closed boxes at ``centres``: [(vertices, faces)]."""
-    return [(np.asarray(trimesh.creation.box((1.0, 0.5, 0.5)).vertices) + c,
-             np.asarray(trimesh.creation.box((1.0, 0.5, 0.5)).faces)) for c in centres]
+    box = trimesh.creation.box((1.0, 0.5, 0.5))
+    return [(np.asarray(box.vertices) + c, np.asarray(box.faces)) for c in centres]
 
 
 @pytest.fixture(scope="module")

@@ -34,9 +34,8 @@ from data_synth.makehuman.segmentation import EYE, MOUTH
 from data_synth.sampling import sample_weights
 from retarget.api import Retargeter
 from retarget.evaluate import RealRig, arkit_ict_matrix, ict_to_arkit_weights
-from retarget.jaw import MOUTH as MOUTH_SHAPES, chin_vertices
+from retarget.jaw import MOUTH as MOUTH_SHAPES, JawParts, chin_vertices
 from retarget.mesh import Mesh
-from retarget.stabilise import rigid_fit
 
 sys.path.insert(0, "docs/results/parts")
 from parts import FRAMES, SEED, landmarks, test_heads  # noqa: E402
@@ -84,14 +83,12 @@ def assemble(neutral, faces, parts):
 
 
 def true_parts(frames, neutral, chin, mesh, idx):
-    """The parts' true places in each frame (T, P, 3) for P = every part vertex, in mesh order."""
-    out = np.repeat(mesh.vertices[None, len(neutral):], len(frames), axis=0).astype(np.float64)
-    carried = np.concatenate([idx[n] for n in CARRIED]) - len(neutral)
-    rest = mesh.vertices[carried + len(neutral)]
-    for t, f in enumerate(frames):
-        m = rigid_fit(f[chin], neutral[chin], np.arange(len(chin)))
-        out[t, carried] = rest @ m.rotation.T + m.translation
-    return out
+    """The parts' true places in each frame (T, P, 3) for P = every part vertex, in mesh order:
+    CARRIED moved by the true chin's motion (``JawParts.carry`` with the true rig's chin)."""
+    v = len(neutral)
+    truth = JawParts(np.asarray(mesh.vertices, np.float64), np.arange(v), chin,
+                     np.sort(np.concatenate([idx[n] for n in CARRIED])), len(CARRIED))
+    return np.stack([truth.carry(np.concatenate([f, mesh.vertices[v:]]))[v:] for f in frames])
 
 
 def run():
