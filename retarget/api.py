@@ -46,6 +46,7 @@ from .checkpoint import checkpoint_code_map, load_checkpoint, model_from_checkpo
 from .code_map import check_code_map, check_gate, head_code_map
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
+from .eyes import Eyes, find_eyes, gaze_from_weights, weights_from_gaze
 from .jaw import SHAPES as JAW_SHAPES, JawParts, find_jaw_parts
 from .mesh import Mesh, as_mesh, face_part, is_mesh_like, submesh
 from .prepare import IMAGE_CHANNELS, PreparedMesh, neutral_channels, prepare_mesh, vertex_features
@@ -90,7 +91,8 @@ class Target:
     proxy for large meshes. feat: (V',6) float32 canonical features of every vertex of the face
     (V' = V without parts). c: (128,) image code; codes: z_ID and skinning weights (ω_Skin per
     vertex of the face). jaw: the parts its jaw carries (``Retargeter.jaw_parts``, found on first
-    use; ``jaw_found`` says whether it was looked for).
+    use; ``jaw_found`` says whether it was looked for); eyes: its eyeballs (``Retargeter.eyes``,
+    the same way, ``eyes_found``).
     """
 
     mesh: Mesh
@@ -101,6 +103,8 @@ class Target:
     face: np.ndarray | None = None
     jaw: JawParts | None = None
     jaw_found: bool = False
+    eyes: Eyes | None = None
+    eyes_found: bool = False
 
     @property
     def n_vertices(self) -> int:
@@ -149,7 +153,8 @@ class SourceTopology:
     neutral: for an entry of a source neutral, (its proxy's canonical vertices (V',3) float32, their
     unit normals (V',3) float64) -- the reference of the neutral channels, made on first use.
     rest: for an entry of a source neutral, the indices of its rest vertices
-    (``Retargeter.rest_vertices``), made on first use.
+    (``Retargeter.rest_vertices``), made on first use. eyes: its eyeballs (``Retargeter.source_eyes``),
+    looked for on first use (``eyes_found``).
     """
 
     faces: np.ndarray
@@ -160,6 +165,8 @@ class SourceTopology:
     neutral: tuple[np.ndarray, np.ndarray] | None = None
     face: np.ndarray | None = None
     rest: np.ndarray | None = None
+    eyes: Eyes | None = None
+    eyes_found: bool = False
 
     def proxy(self, mesh: Mesh) -> Mesh:
         """The mesh the encoder sees for a frame of this topology: the frame's face, or its proxy
@@ -416,8 +423,9 @@ class Retargeter:
     separate parts (eyeballs, teeth, a tongue, lashes beside the skin), the network sees the
     face alone (``retarget.mesh.face_part``: the part with the most vertices) and the other parts
     keep their place in every result (False: the whole mesh is the face), but for those of a
-    target that its jaw carries (lower teeth, a tongue: ``jaw_parts``) with ``carry_jaw`` (False:
-    every part stays at rest). stabilise: remove each
+    target that its jaw carries (lower teeth, a tongue: ``jaw_parts``) with ``carry_jaw``, and its
+    eyeballs, turned with the gaze (``eyes``) with ``turn_eyes`` (both False: every part stays at
+    rest). stabilise: remove each
     source frame's head motion against the source's neutral (without one, against a take's first
     frame) before the frame is read (``stabilise_frames``; False: frames are taken as they are).
     """
@@ -458,7 +466,8 @@ class Retargeter:
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
                  refine_steps: int = 0, code_map: np.ndarray | None = None,
                  code_map_gate: np.ndarray | None = None, upright: bool = True,
-                 face_only: bool = True, stabilise: bool = True, carry_jaw: bool = True):
+                 face_only: bool = True, stabilise: bool = True, carry_jaw: bool = True,
+                 turn_eyes: bool = True):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
@@ -476,6 +485,7 @@ class Retargeter:
         self.face_only = face_only         # the network sees a mesh's face part alone
         self.stabilise = stabilise         # source frames' head motion removed (``stabilise_frames``)
         self.carry_jaw = carry_jaw         # a target's lower teeth and tongue follow its jaw (``jaw_parts``)
+        self.turn_eyes = turn_eyes         # a target's eyeballs turn with the gaze (``eyes``)
 
     @property
     def code_map(self) -> np.ndarray | None:
@@ -606,7 +616,7 @@ class Retargeter:
         ``source_cache_size`` entries (0 = no cache: computed on every call);
         :meth:`clear_source_cache` empties it.
         """
-        key = (ref.n_vertices, _digest(ref.faces)) + ((_digest(ref.vertices),) if neutral else ())
+        key = self._source_key(ref, neutral)
         if key in self._sources:
             self._sources.move_to_end(key)
             return self._sources[key]
@@ -627,6 +637,11 @@ class Retargeter:
             while len(self._sources) > self.source_cache_size:
                 self._sources.popitem(last=False)
         return src
+
+    @staticmethod
+    def _source_key(ref: Mesh, neutral: bool) -> tuple:
+        """``source_topology``'s cache key of a reference mesh."""
+        return (ref.n_vertices, _digest(ref.faces)) + ((_digest(ref.vertices),) if neutral else ())
 
     def clear_source_cache(self) -> None:
         """Forget the source topologies kept by :meth:`source_topology` (e.g. before streaming
@@ -710,13 +725,17 @@ class Retargeter:
         ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames.
         ``refine``: analysis-by-synthesis on the source's own baked rig (needs ``source_neutral``;
         see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT`` and
-        towards 0 with ``REFINE_SPARSITY_INVERT``, reweighted by ``REFINE_REWEIGHT_INVERT``."""
+        towards 0 with ``REFINE_SPARSITY_INVERT``, reweighted by ``REFINE_REWEIGHT_INVERT``. A
+        source with eyeballs (``source_eyes``) gives its eight look weights from their turn
+        (``source_gaze``, ``retarget.eyes.weights_from_gaze``)."""
         z = self.encode(frames, source_neutral, progress)
         w = z[..., :N_FACS]
         if refine:
             w = self.refine_fit(frames, source_neutral, z, self.REFINE_PRIOR_INVERT,
                                 self.REFINE_SPARSITY_INVERT, self.REFINE_JOINT_INVERT,
                                 self.REFINE_REWEIGHT_INVERT)[0].reshape(w.shape)
+        if self.source_eyes(frames, source_neutral) is not None:     # the looks its eyeballs show
+            w = weights_from_gaze(self.source_gaze(frames, source_neutral).reshape(w.shape[:-1] + (2, 2)), w)
         if smooth and w.ndim == 2:
             w = smooth_codes(w, smooth, fps)
         return np.clip(w, 0.0, 1.0).astype(np.float32)
@@ -936,22 +955,30 @@ class Retargeter:
         return free.detach().cpu().numpy()
 
     # --------------------------------------------------------------------------- decoding
-    def decode(self, target, z_ge, progress: bool = False) -> np.ndarray:
+    def decode(self, target, z_ge, progress: bool = False, gaze=None) -> np.ndarray:
         """Target vertices for expression code(s) z_GE (128,) or (T,128) -> (V,3) or (T,V,3) float64,
-        in the target's frame and units. ``progress``: a tqdm bar over frames. For long sequences
-        on big targets, ``iter_decode`` yields the frames one at a time instead."""
+        in the target's frame and units. ``progress``: a tqdm bar over frames. gaze: None, or
+        (2,2) / (T,2,2) the gaze its eyes turn to (``iter_decode``). For long sequences on big
+        targets, ``iter_decode`` yields the frames one at a time instead."""
         z = np.asarray(z_ge, np.float32)
-        frames = np.stack(list(self.iter_decode(target, z.reshape(-1, z.shape[-1]), progress)))
+        frames = np.stack(list(self.iter_decode(target, z.reshape(-1, z.shape[-1]), progress, gaze)))
         return frames[0] if z.ndim == 1 else frames
 
-    def iter_decode(self, target, z_ge, progress: bool = False):
+    def iter_decode(self, target, z_ge, progress: bool = False, gaze=None):
         """Yield the target's vertices (V,3) float64 for each code of z_GE (T,128), one frame at a
         time: the memory of one frame whatever T (a 1M-vertex frame is 24 MB). A target's parts
-        that its jaw carries (``jaw_parts``) move with its chin; its other parts stay at rest."""
+        that its jaw carries (``jaw_parts``) move with its chin; its eyeballs (``eyes``) turn to
+        ``gaze`` (T,2,2) radians (``retarget.eyes``; None: they stay at rest, as its other parts do)."""
         target = self.prepare(target)
-        jaw = self.jaw_parts(target)
-        for frame in self._iter_decode_face(target, z_ge, progress):
-            yield frame if jaw is None else jaw.carry(frame)
+        jaw, eyes = self.jaw_parts(target), self.eyes(target)
+        if gaze is not None:
+            gaze = np.asarray(gaze, np.float64).reshape(-1, 2, 2)
+            if len(gaze) != len(z_ge):
+                raise RetargetError(f"iter_decode: {len(gaze)} gazes for {len(z_ge)} codes")
+        for t, frame in enumerate(self._iter_decode_face(target, z_ge, progress)):
+            if jaw is not None:
+                frame = jaw.carry(frame)
+            yield frame if eyes is None or gaze is None else eyes.pose(frame, gaze[t])
 
     def _iter_decode_face(self, target: Target, z_ge, progress: bool = False):
         """``iter_decode`` with every part beside the face at rest (the decoder's output alone)."""
@@ -977,13 +1004,74 @@ class Retargeter:
         analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior``,
         ``refine_sparsity``, ``refine_joint`` and ``refine_reweight``), temporally filtered when
         ``smooth`` is given (see ``invert``)."""
-        z = self.encode(source, source_neutral, progress)
-        if refine:
-            z = self.refine(source, source_neutral, z, refine_prior, refine_sparsity, refine_joint,
-                            refine_reweight)
+        z = self._codes_weights(source, source_neutral, progress, refine, refine_prior,
+                                refine_sparsity, refine_joint, refine_reweight)[0]
         if smooth and z.ndim == 2:
             z = smooth_codes(z, smooth, fps)
         return z
+
+    def _codes_weights(self, source, source_neutral, progress: bool, refine: bool, prior=None,
+                       sparsity=None, joint=None, reweight=()) -> tuple[np.ndarray, np.ndarray]:
+        """``expression_codes`` before smoothing, and the FACS weights the codes stand for: with
+        ``refine`` the fitted ones, else the encoder's clipped to [0,1] -> ((128,) or (T,128),
+        (53,) or (T,53))."""
+        z = self.encode(source, source_neutral, progress)
+        if not refine:
+            return z, np.clip(z[..., :N_FACS], 0.0, 1.0)
+        w, f = self.refine_fit(source, source_neutral, z, prior, sparsity, joint, reweight)
+        z_fit = self.rig_codes(w, f, self.source_rig(source_neutral).target).reshape(np.shape(z))
+        return z_fit, w.reshape(np.shape(z)[:-1] + (N_FACS,))
+
+    def expression(self, source, source_neutral: Mesh | None = None, smooth: str | None = None,
+                   fps: float = 30.0, progress: bool = False,
+                   refine: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """What ``transfer`` draws on a target: the codes z_GE of ``expression_codes`` and the gaze
+        its eyes turn to (``source_gaze``: of the source's eyeballs, or without them of the weights
+        the codes stand for), both filtered alike when ``smooth`` is given -> ((128,) or (T,128),
+        (2,2) or (T,2,2) radians)."""
+        z, w = self._codes_weights(source, source_neutral, progress, refine)
+        gaze = self.source_gaze(source, source_neutral, w).reshape(np.shape(z)[:-1] + (2, 2))
+        if smooth and z.ndim == 2:
+            z = smooth_codes(z, smooth, fps)
+            gaze = smooth_codes(gaze.reshape(len(gaze), 4), smooth, fps).reshape(gaze.shape)
+        return z, gaze
+
+    def source_eyes(self, frames, source_neutral: Mesh | None = None) -> Eyes | None:
+        """A source's eyeballs (``retarget.eyes``) at rest in its neutral, without one in the
+        frames' first, found once per source topology; None for a source of one part, without
+        ``turn_eyes`` or ``face_only``, or when no pair of its parts is a pair of eyeballs."""
+        if not self.turn_eyes:
+            return None
+        frames, _ = source_frames(frames)
+        neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
+        ref = neutral or frames[0]
+        if (self._source_key(ref, neutral is not None) not in self._sources
+                and (not self.face_only or face_part(ref) is None)):
+            return None                     # one part: no eyes, and no operators computed for it
+        src = self.source_topology(ref, neutral=neutral is not None)
+        if src.face is None:
+            return None
+        if not src.eyes_found:
+            src.eyes = find_eyes(ref.vertices, ref.faces, src.face, src.canon.to_canonical,
+                                 src.canon.rotation)
+            src.eyes_found = True
+        return None if src.eyes is None else src.eyes.at(ref.vertices)
+
+    def source_gaze(self, frames, source_neutral: Mesh | None = None, weights=None) -> np.ndarray:
+        """The gaze (T,2,2) of source frame(s) (radians, ``retarget.eyes``): that of the source's
+        eyeballs (``source_eyes``; ``Eyes.measure`` once the frames' head motion is removed) against
+        its neutral, without one against the first frame; for a source without eyeballs that of
+        ``weights`` (T,53) (``gaze_from_weights``; RetargetError when they are not given)."""
+        eyes = self.source_eyes(frames, source_neutral)
+        if eyes is None:
+            if weights is None:
+                raise RetargetError("source_gaze: the source has no eyeballs; give the weights")
+            return gaze_from_weights(np.asarray(weights, np.float64).reshape(-1, N_FACS))
+        frames, _ = source_frames(frames)
+        neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
+        if self.stabilise and (neutral is not None or len(frames) > 1):
+            frames = self.stabilise_frames(frames, neutral or frames[0])[0]
+        return np.stack([eyes.measure(f.vertices) for f in frames])
 
     def transfer(self, source, target, source_neutral: Mesh | None = None,
                  smooth: str | None = None, fps: float = 30.0, progress: bool = False,
@@ -993,13 +1081,14 @@ class Retargeter:
         ``refine``: codes from analysis-by-synthesis on the source (needs ``source_neutral``).
         The source's head motion is removed (``stabilise``) and the results carry the expression
         alone; ``head_motion``: then carry the head motion onto the target too
-        (``carry_head_motion``; needs ``stabilise``)."""
+        (``carry_head_motion``; needs ``stabilise``). A target's eyeballs turn with the source's
+        (``expression``)."""
         if head_motion and not self.stabilise:
             raise RetargetError("head_motion needs stabilise: the head motion is what stabilisation "
                                 "finds (--head-motion cannot go with --no-stabilise)")
         target = self.prepare(target)
-        out = self.decode(target, self.expression_codes(source, source_neutral, smooth, fps, progress,
-                                                        refine), progress)
+        z, gaze = self.expression(source, source_neutral, smooth, fps, progress, refine)
+        out = self.decode(target, z, progress, gaze)
         if not head_motion:
             return out
         return np.stack(list(self.carry_head_motion(source, source_neutral, target,
@@ -1007,9 +1096,11 @@ class Retargeter:
 
     def animate(self, target, weights, progress: bool = False) -> np.ndarray:
         """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list
-        of dicts {ICT name: value} -> (V,3) or (T,V,3), decoded from ``weight_codes``."""
+        of dicts {ICT name: value} -> (V,3) or (T,V,3), decoded from ``weight_codes``; its
+        eyeballs turn with the looks (``retarget.eyes.gaze_from_weights``)."""
         target = self.prepare(target)
-        return self.decode(target, self.weight_codes(weights, target), progress)
+        return self.decode(target, self.weight_codes(weights, target), progress,
+                           gaze_from_weights(weights_array(weights)))
 
     def weight_codes(self, weights, target) -> np.ndarray:
         """FACS weights (as ``weights_array`` takes them) -> the codes z_GE that draw them on
@@ -1023,12 +1114,17 @@ class Retargeter:
     def bake(self, target, parts: bool = True) -> BakedRig:
         """Decode the 53 one-hot expressions once: a linear blendshape rig for the target. With the
         basis decoder it is the decoder's own rig, ``codes.basis`` (exact for FACS-weight codes).
-        Each shape moves the parts the target's jaw carries (``jaw_parts``) as it moves the chin;
+        Each shape moves the parts the target's jaw carries (``jaw_parts``) as it moves the chin,
+        and each look shape turns the eyeballs (``eyes``) as a look at weight 1 does;
         ``parts=False``: every part beside the face at rest (the rig that refine fits)."""
         target = self.prepare(target)
         rig = self._bake_face(target)
-        jaw = self.jaw_parts(target) if parts else None
-        return rig if jaw is None else BakedRig(rig.neutral, jaw.carry_shapes(rig.deltas, rig.neutral))
+        if not parts:
+            return rig
+        jaw, eyes = self.jaw_parts(target), self.eyes(target)
+        deltas = rig.deltas if jaw is None else jaw.carry_shapes(rig.deltas, rig.neutral)
+        deltas = deltas if eyes is None else eyes.pose_shapes(deltas)
+        return rig if deltas is rig.deltas else BakedRig(rig.neutral, deltas)
 
     def _bake_face(self, target: Target, names=None) -> BakedRig:
         """``bake`` with every part beside the face at rest, of the FACS shapes ``names`` (default
@@ -1057,6 +1153,20 @@ class Retargeter:
                                         shapes, target.proxy.canon.to_canonical)
             target.jaw_found = True
         return target.jaw
+
+    def eyes(self, target) -> Eyes | None:
+        """A target's eyeballs (``retarget.eyes``: two near-spheres beside the face, mirrored across
+        it, with the parts inside them), found once per target; None for a mesh of one part,
+        without ``turn_eyes``, or when no pair of its parts is a pair of eyeballs."""
+        target = self.prepare(target)
+        if target.face is None or not self.turn_eyes:
+            return None
+        if not target.eyes_found:
+            canon = target.proxy.canon
+            target.eyes = find_eyes(target.mesh.vertices, target.mesh.faces, target.face,
+                                    canon.to_canonical, canon.rotation)
+            target.eyes_found = True
+        return target.eyes
 
 
 def weight_codes(weights) -> np.ndarray:

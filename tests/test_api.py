@@ -13,6 +13,7 @@ from retarget import api
 from retarget.api import Retargeter, check_head_like
 from retarget.checkpoint import CHECKPOINT_FORMAT, save_checkpoint
 from retarget.decimate import cluster_decimate, cluster_means
+from retarget.eyes import LOOK_INDEX, gaze_from_weights
 from retarget.errors import RetargetError
 from retarget.mesh import Mesh
 from retarget.smoothing import one_euro, savgol, smooth_codes
@@ -308,7 +309,8 @@ def test_mesh_parts_weld_seams_and_the_face_is_the_largest_part():
 def test_separate_parts_are_left_out_and_keep_their_place(r, ckpt, tmp_path):
     """Eyeballs and teeth beside the skin: the network sees the face alone, so every result on the
     face is what the head alone gives, and the parts keep their place (however they move in the
-    source's frames); face_only=False feeds the whole mesh as before."""
+    source's frames, as long as its eyeballs do not turn); invert reads no look from eyeballs that
+    do not turn; face_only=False feeds the whole mesh as before."""
     head, smile = head_mesh(2), head_mesh(2, smile=2.0)
     full = with_parts(head)
     n = head.n_vertices
@@ -318,10 +320,16 @@ def test_separate_parts_are_left_out_and_keep_their_place(r, ckpt, tmp_path):
     assert both.shape == (2, full.n_vertices, 3)
     assert np.allclose(both[:, :n], alone, atol=1e-5)        # float32 sums: 1e-6 apart
     assert np.array_equal(both[:, n:], np.broadcast_to(full.vertices[n:], both[:, n:].shape))
-    assert np.allclose(r.invert(frames, source_neutral=full, refine=True),
-                       r.invert([smile, head], source_neutral=head, refine=True), atol=1e-6)
+    looks = np.unique(LOOK_INDEX)                 # the eyeballs, which do not turn, say: no look
+    inverted = r.invert(frames, source_neutral=full, refine=True)
+    assert np.abs(gaze_from_weights(inverted)).max() < 1e-6
+    assert np.allclose(np.delete(inverted, looks, axis=1),
+                       np.delete(r.invert([smile, head], source_neutral=head, refine=True), looks, axis=1),
+                       atol=1e-6)
     baked = r.bake(full)
-    assert baked.deltas.shape == (53, full.n_vertices, 3) and not baked.deltas[:, n:].any()
+    assert baked.deltas.shape == (53, full.n_vertices, 3)
+    assert not np.delete(baked.deltas, looks, axis=0)[:, n:].any()      # parts at rest, but for
+    assert not baked.deltas[looks, -8:].any() and baked.deltas[looks, n:-8].any()   # turning eyes
     assert np.allclose(baked.deltas[:, :n], r.bake(head).deltas, atol=1e-6)
     whole = Retargeter.load(ckpt, device="cpu", cache_dir=tmp_path, face_only=False)
     assert np.abs(whole.transfer(frames, full)[:, n:] - full.vertices[n:]).max() > 1e-3

@@ -314,12 +314,20 @@ def test_separate_parts_are_reported_and_all_parts_feeds_them(tmp_path, capsys):
 
     full = with_parts(head_mesh(2))
     save_mesh(tmp_path / "parts.obj", full)
-    (tmp_path / "w.json").write_text('{"jawOpen": 0.8}')
+    (tmp_path / "w.json").write_text('{"jawOpen": 0.8, "eyeLookUp_L": 1.0}')
     common = [str(tmp_path / "parts.obj"), "--weights", str(tmp_path / "w.json"), "--checkpoint",
               str(tiny_checkpoint(tmp_path / "tiny.pt")), "--device", "cpu"]
     assert main(["animate", *common, "-o", str(tmp_path / "a.obj")]) == 0
-    assert "parts.obj: the network saw the face alone (162 of 254 vertices" in capsys.readouterr().err
-    assert np.allclose(load_mesh(tmp_path / "a.obj").vertices[162:], full.vertices[162:], atol=1e-6)
+    err = capsys.readouterr().err
+    assert "parts.obj: the network saw the face alone (162 of 254 vertices" in err
+    assert "84 vertices in 2 part(s) of two eyeballs, which turn with the gaze" in err
+    out = load_mesh(tmp_path / "a.obj").vertices           # the left eye (x > 0) looks up, alone
+    assert np.allclose(out[162:204], full.vertices[162:204], atol=1e-6)
+    assert np.allclose(out[246:], full.vertices[246:], atol=1e-6)
+    assert (out[204:246, 1] - full.vertices[204:246, 1]).max() > 0.3
+    assert main(["animate", *common, "-o", str(tmp_path / "c.obj"), "--still-parts"]) == 0
+    assert "eyeballs" not in capsys.readouterr().err
+    assert np.allclose(load_mesh(tmp_path / "c.obj").vertices[162:], full.vertices[162:], atol=1e-6)
     assert main(["animate", *common, "-o", str(tmp_path / "b.obj"), "--all-parts"]) == 0
     assert "face alone" not in capsys.readouterr().err
     assert np.abs(load_mesh(tmp_path / "b.obj").vertices[162:] - full.vertices[162:]).max() > 1e-3

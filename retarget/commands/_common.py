@@ -40,7 +40,8 @@ def add_model_args(p, target: bool = True) -> None:
         return
     p.add_argument("--still-parts", action="store_true",
                    help="leave every separate part of a target at rest: do not move its lower teeth "
-                        "and tongue (the parts below the mouth corners) with its jaw")
+                        "and tongue (the parts below the mouth corners) with its jaw, nor turn its "
+                        "eyeballs with the gaze")
 
 
 def add_neutral_args(p) -> None:
@@ -177,17 +178,23 @@ def print_notes(r, target=None, target_name: str = "", frames=None, neutral=None
 
     heads = []
     if target is not None:
-        jaw = r.jaw_parts(target)
+        jaw, eyes = r.jaw_parts(target), r.eyes(target)
+        moving = ([f"{len(jaw.carried):,} vertices in {jaw.parts} part(s) below the mouth (lower "
+                   "teeth, tongue), which move with the jaw"] if jaw is not None else [])
+        if eyes is not None:
+            moving.append(f"{sum(map(len, eyes.vertices)):,} vertices in {eyes.parts} part(s) of "
+                          "two eyeballs, which turn with the gaze")
         parts = "keep their place in the results"
-        if jaw is not None:
-            parts = (f"keep their place in the results, but for {len(jaw.carried):,} vertices in "
-                     f"{jaw.parts} part(s) below the mouth (lower teeth, tongue), which move with "
-                     "the jaw (--still-parts: keep them at rest too)")
+        if moving:
+            parts += f", but for {' and '.join(moving)} (--still-parts: keep them at rest too)"
         heads.append((target_name, target.proxy.canon, target.face, target.n_vertices, parts))
     if frames is not None:
         ref = neutral if neutral is not None else frames[0]
         src = r.source_topology(ref, neutral=neutral is not None)
-        heads.append((source_name, src.canon, src.face, ref.n_vertices, "are left out"))
+        eyes = r.source_eyes(frames, neutral) if src.face is not None else None
+        heads.append((source_name, src.canon, src.face, ref.n_vertices, "are left out" + (
+            "" if eyes is None else f", but for the turn of its two eyeballs ({eyes.parts} part(s)), "
+                                    "which gives the gaze")))
     for name, canon, face, n, parts in heads:
         if face is not None:
             print(f"{name}: the network saw the face alone ({len(face):,} of {n:,} vertices, the "
@@ -254,6 +261,7 @@ def retargeter(args):
                            upright=not getattr(args, "no_upright", False),
                            face_only=not getattr(args, "all_parts", False),
                            carry_jaw=not getattr(args, "still_parts", False),
+                           turn_eyes=not getattr(args, "still_parts", False),
                            stabilise=not getattr(args, "no_stabilise", False), **extra)
 
 

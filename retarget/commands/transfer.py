@@ -53,11 +53,11 @@ def run(args) -> int:
     r = retargeter(args)
     neutral = estimated_neutral(args, r, frames, neutral)
     tgt = r.prepare(target)
-    z = r.expression_codes(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
+    z, gaze = r.expression(frames, neutral, smooth=args.smooth, fps=args.fps, progress=True,
                            refine=args.refine)
     z = z.reshape(-1, z.shape[-1])
     print_notes(r, tgt, args.target, frames, neutral, args.source_neutral or args.source)
-    results = r.iter_decode(tgt, z, progress=True)
+    results = r.iter_decode(tgt, z, progress=True, gaze=gaze.reshape(-1, 2, 2))
     if args.head_motion:
         results = r.carry_head_motion(frames, neutral, tgt, results)
     written = write_frames(args.out, results, target.faces, inputs, args, fps=args.fps, n_frames=len(z))

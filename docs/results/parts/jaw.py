@@ -27,8 +27,6 @@ import numpy as np
 import trimesh
 
 from data_synth.facs import FACS_INDEX, FACS_NAMES
-from data_synth.makehuman import (base_head_rig, build_head_rig, head_tessellation,
-                                  sample_head_identity)
 from data_synth.makehuman.expressions import base_arkit_ict
 from data_synth.makehuman.segmentation import EYE, MOUTH
 from data_synth.sampling import sample_weights
@@ -38,7 +36,7 @@ from retarget.jaw import MOUTH as MOUTH_SHAPES, JawParts, chin_vertices
 from retarget.mesh import Mesh
 
 sys.path.insert(0, "docs/results/parts")
-from parts import FRAMES, SEED, landmarks, test_heads  # noqa: E402
+from parts import FRAMES, SEED, crop_heads, landmarks, test_heads  # noqa: E402
 
 PARTS = ("eyes", "upper teeth", "lower teeth", "tongue")
 CARRIED = ("lower teeth", "tongue")
@@ -154,18 +152,9 @@ def classified(split: str, seeds, lifts=None) -> str:
     heads ``seeds`` in every crop (decimated to 4,000 vertices), each given PARTS by its landmarks;
     with ``lifts``, for each value of ``retarget.jaw.LIFT`` in turn (the others as they are)."""
     import retarget.jaw as jaw_module
-    from data_synth.makehuman.tessellate import CROPS
 
     r = Retargeter.load(None)
-    heads = []
-    for s in seeds:
-        base = base_head_rig(sample_head_identity(s, split), "arkit")
-        parts = head_parts(*landmarks(base.neutral))
-        for crop in CROPS:
-            rig = build_head_rig(base, head_tessellation(seed=s, n_vertices=4000, kind="decimated",
-                                                         crop=crop), 20)
-            mesh, idx = assemble(rig.neutral, rig.faces, parts)
-            heads.append((f"head {s} {crop}", r.prepare(mesh), idx))
+    heads = [(name, r.prepare(mesh), idx) for name, mesh, idx in crop_heads(split, seeds, head_parts, assemble)]
     lines, kept = [], jaw_module.LIFT
     for lift in lifts or (kept,):
         jaw_module.LIFT = lift

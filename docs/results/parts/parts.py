@@ -81,6 +81,21 @@ def test_heads(w53: np.ndarray):
         yield s, base, rig, w
 
 
+def crop_heads(split: str, seeds, make_parts, assemble):
+    """Yield (name, mesh, part indices) for the ``split`` heads ``seeds`` in every crop (decimated to
+    4,000 vertices), each given ``make_parts(*landmarks)`` by ``assemble(neutral, faces, parts)``."""
+    from data_synth.makehuman.tessellate import CROPS
+
+    for s in seeds:
+        base = base_head_rig(sample_head_identity(s, split), "arkit")
+        parts = make_parts(*landmarks(base.neutral))
+        for crop in CROPS:
+            rig = build_head_rig(base, head_tessellation(seed=s, n_vertices=4000, kind="decimated",
+                                                         crop=crop), 20)
+            mesh, idx = assemble(rig.neutral, rig.faces, parts)
+            yield f"head {s} {crop}", mesh, idx
+
+
 def add(neutral: np.ndarray, faces: np.ndarray, parts) -> Mesh:
     pv, pf = parts
     return Mesh(np.concatenate([neutral, pv]), np.concatenate([faces, pf + len(neutral)]))
