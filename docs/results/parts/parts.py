@@ -114,8 +114,10 @@ def run():
                       parts_at(*landmarks(base.neutral))))
     src_neutral = add(real.neutral, real.faces, arkit_parts)
     src_frames = [add(f, real.faces, arkit_parts) for f in src]
-    nets = {"face alone (default)": Retargeter.load(None),
-            "whole mesh (--all-parts)": Retargeter.load(None, face_only=False)}
+    # eyeballs kept at rest (turn_eyes=False): these source frames' eyeballs do not turn with their
+    # looks, and the study is of the face alone (eyes.py studies the eyes' turn)
+    nets = {"face alone (default)": Retargeter.load(None, turn_eyes=False),
+            "whole mesh (--all-parts)": Retargeter.load(None, face_only=False, turn_eyes=False)}
     lines = ["| case | method | no neutral | neutral | neutral + refine |", "| --- | --- | ---: | ---: | ---: |"]
 
     def skin_mse(pred, gt):
