@@ -1156,8 +1156,9 @@ class Retargeter:
 
     def eyes(self, target) -> Eyes | None:
         """A target's eyeballs (``retarget.eyes``: two near-spheres beside the face, mirrored across
-        it, with the parts inside them), found once per target; None for a mesh of one part,
-        without ``turn_eyes``, or when no pair of its parts is a pair of eyeballs."""
+        it, with the parts inside them), found once per target; None for a mesh of one part (or
+        without ``face_only``), without ``turn_eyes``, or when no pair of its parts is a pair of
+        eyeballs."""
         target = self.prepare(target)
         if target.face is None or not self.turn_eyes:
             return None
