@@ -1060,8 +1060,9 @@ class Retargeter:
     def source_gaze(self, frames, source_neutral: Mesh | None = None, weights=None) -> np.ndarray:
         """The gaze (T,2,2) of source frame(s) (radians, ``retarget.eyes``): that of the source's
         eyeballs (``source_eyes``; ``Eyes.measure`` once the frames' head motion is removed) against
-        its neutral, without one against the first frame; for a source without eyeballs that of
-        ``weights`` (T,53) (``gaze_from_weights``; RetargetError when they are not given)."""
+        its neutral; without one, against the frames' median gaze (the take looks ahead on
+        average; a single frame looks ahead); for a source without eyeballs that of ``weights``
+        (T,53) (``gaze_from_weights``; RetargetError when they are not given)."""
         eyes = self.source_eyes(frames, source_neutral)
         if eyes is None:
             if weights is None:
@@ -1071,7 +1072,10 @@ class Retargeter:
         neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
         if self.stabilise and (neutral is not None or len(frames) > 1):
             frames = self.stabilise_frames(frames, neutral or frames[0])[0]
-        return np.stack([eyes.measure(f.vertices) for f in frames])
+        gaze = np.stack([eyes.measure(f.vertices) for f in frames])
+        if neutral is None:     # against the first frame: ahead is where the take looks on average
+            gaze -= np.median(gaze, axis=0)
+        return gaze
 
     def transfer(self, source, target, source_neutral: Mesh | None = None,
                  smooth: str | None = None, fps: float = 30.0, progress: bool = False,

@@ -152,6 +152,8 @@ def test_bundled_model_turns_eyes_from_looks_and_from_a_sources_eyeballs():
     looks[:, LOOK_INDEX.ravel()] = rng.uniform(0, 1, (3, 8)) * (rng.uniform(size=(3, 8)) < 0.5)
     frames = [Mesh(eyes.pose(v, g), f) for g in gaze_from_weights(looks)]
     assert np.allclose(r.source_gaze(frames, mesh), gaze_from_weights(looks), atol=1e-9)
+    ahead = gaze_from_weights(looks) - np.median(gaze_from_weights(looks), axis=0)
+    assert np.allclose(r.source_gaze(frames), ahead, atol=0.01)      # no neutral: the take's median
     z, gaze = r.expression(frames, mesh, smooth="one_euro")
     assert z.shape == (3, 128) and gaze.shape == (3, 2, 2) and np.isfinite(gaze).all()
     moved = r.transfer(frames, mesh, source_neutral=mesh, refine=True)

@@ -10,7 +10,8 @@ weights (``retarget.eyes.gaze_from_weights``: a look at weight 1 turns the eye b
 a convention, the only definition of a look's turn the project has; the artist's shapes move the
 lids alone). The source is the ARKit head's frames either with its eyeballs turned so ("source
 with eyeballs") or as the skin alone ("source without eyeballs": the gaze then comes from the
-look weights the network reads off the lids). Errors: the angle between an eye's true and drawn
+look weights the network reads off the lids); with eyeballs also without a neutral (the gaze then
+measured against the take's median) and with the neutral ``estimate_neutral`` makes. Errors: the angle between an eye's true and drawn
 pupil direction (degrees) and the mean distance of the eyeballs' vertices from their true place
 (mm), over both eyes and all frames; "at rest" is what ``--still-parts`` (and the tool before)
 does. Then invert's eight look weights (mean absolute error; the gaze they turn to against the
@@ -135,6 +136,7 @@ def run():
         with_eyes = [Mesh(turned(np.concatenate([f, src_mesh.vertices[n_src:]]), src_idx, g), src_mesh.faces)
                      for f, g in zip(src, gaze)]
         skin = [Mesh(f, real.faces) for f in src]
+        estimated = r.estimate_neutral(with_eyes)
         for name, neutral, faces, parts in targets:
             mesh, idx = assemble(neutral, faces, parts)
             rest = mesh.vertices
@@ -148,6 +150,10 @@ def run():
                     lambda: r.transfer(skin, mesh, source_neutral=skin_neutral),
                 "transfer, source without eyeballs, neutral + refine":
                     lambda: r.transfer(skin, mesh, source_neutral=skin_neutral, refine=True),
+                "transfer, source with eyeballs, no neutral (against the take's median gaze)":
+                    lambda: r.transfer(with_eyes, mesh),
+                "transfer, source with eyeballs, estimated neutral + refine":
+                    lambda: r.transfer(with_eyes, mesh, source_neutral=estimated, refine=True),
                 "transfer, source with eyeballs, neutral + refine":
                     lambda: r.transfer(with_eyes, mesh, source_neutral=src_mesh, refine=True),
                 "animate (true weights)": lambda: r.animate(mesh, w53),
@@ -163,6 +169,7 @@ def run():
                                        ("with eyeballs", with_eyes, src_mesh)):
             for mode, kw in (("neutral", {}), ("neutral + refine", {"refine": True})):
                 rows.append((f"{label}, {mode}", r.invert(frames, source_neutral=neutral, **kw)))
+        rows.append(("with eyeballs, no neutral", r.invert(with_eyes)))
         for label, w in rows:
             turn = np.degrees(np.abs(gaze_from_weights(w) - gaze)).mean()
             inv.append(f"| {take} | {label} | {np.abs(w[:, looks] - w53[:, looks]).mean():.4f} | {turn:.2f} | "
