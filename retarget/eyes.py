@@ -49,7 +49,6 @@ PAIR_TOLERANCE = 0.25               # mirrored centres: height, depth, side apar
 INSIDE = 1.3                        # a part wholly within this many radii of an eyeball turns with it
 #                                     (a cornea stands up to 0.2 radii proud of its eyeball)
 STILL = 1e-6                        # a gaze (radians) no further from 0 leaves the eye at rest, bit for bit
-SIDES = ("L", "R")                  # eye 0 is the face's left (+x), eye 1 its right
 #: the look shapes, per eye: (yaw towards +x, yaw towards −x, up, down)
 LOOKS = (("eyeLookOut_L", "eyeLookIn_L", "eyeLookUp_L", "eyeLookDown_L"),
          ("eyeLookIn_R", "eyeLookOut_R", "eyeLookUp_R", "eyeLookDown_R"))
