@@ -18,7 +18,8 @@ INIT=${INIT:-retarget/checkpoints/default.pt}   # --init takes the network only,
 LR=${LR:-2e-5}   # stage 19's: fresh schedules from stage 17 at 5e-5 and 1e-4 lost (RESULTS "Stage 18")
 # Judge what comes back on the ARKit rig without the neutral too: 2,500 CPU steps of a fresh
 # schedule from stage 19 left it 40 % worse there at 2e-5 and 24 % at 5e-6, while level or better
-# with the neutral (RESULTS "L_solve").
+# with the neutral (RESULTS "L_solve"); stage 19's own run resumed to 15,000 steps (training/stage20,
+# RESULTS "Stage 19") 10 % worse there frame by frame, 3-6 % better with the neutral and refine.
 WORKERS=${WORKERS:-14}
 TRAIN_S=${TRAIN_S:-360}
 MEASURE_STEPS=${MEASURE_STEPS:-60}
