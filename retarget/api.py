@@ -734,8 +734,10 @@ class Retargeter:
             w = self.refine_fit(frames, source_neutral, z, self.REFINE_PRIOR_INVERT,
                                 self.REFINE_SPARSITY_INVERT, self.REFINE_JOINT_INVERT,
                                 self.REFINE_REWEIGHT_INVERT)[0].reshape(w.shape)
-        if self.source_eyes(frames, source_neutral) is not None:     # the looks its eyeballs show
-            w = weights_from_gaze(self.source_gaze(frames, source_neutral).reshape(w.shape[:-1] + (2, 2)), w)
+        eyes = self.source_eyes(frames, source_neutral)
+        if eyes is not None:                                        # the looks its eyeballs show
+            gaze = self._measured_gaze(eyes, frames, source_neutral)
+            w = weights_from_gaze(gaze.reshape(w.shape[:-1] + (2, 2)), w)
         if smooth and w.ndim == 2:
             w = smooth_codes(w, smooth, fps)
         return np.clip(w, 0.0, 1.0).astype(np.float32)
@@ -814,8 +816,15 @@ class Retargeter:
                joint: bool | None = None, reweight: tuple = ()) -> np.ndarray:
         """Analysis-by-synthesis (``refine_fit``), as the codes z_GE the decoder draws the fit with
         (``rig_codes``): (128,) or (T,128) like ``z_ge``, float32."""
+        return self._refined(frames, source_neutral, z_ge, prior, sparsity, joint, reweight)[0]
+
+    def _refined(self, frames, source_neutral: Mesh, z_ge: np.ndarray, prior=None, sparsity=None,
+                 joint=None, reweight=()) -> tuple[np.ndarray, np.ndarray]:
+        """``refine``'s codes, shaped like ``z_ge``, and the fitted weights they stand for, (53,) or
+        (T,53)."""
         w, f = self.refine_fit(frames, source_neutral, z_ge, prior, sparsity, joint, reweight)
-        return self.rig_codes(w, f, self.source_rig(source_neutral).target).reshape(np.shape(z_ge))
+        codes = self.rig_codes(w, f, self.source_rig(source_neutral).target).reshape(np.shape(z_ge))
+        return codes, w.reshape(np.shape(z_ge)[:-1] + (N_FACS,))
 
     def rig_codes(self, w: np.ndarray, f: np.ndarray, target) -> np.ndarray:
         """The codes z_GE of weights w (T,53) on ``target``'s rig plus free dims f
@@ -970,15 +979,16 @@ class Retargeter:
         that its jaw carries (``jaw_parts``) move with its chin; its eyeballs (``eyes``) turn to
         ``gaze`` (T,2,2) radians (``retarget.eyes``; None: they stay at rest, as its other parts do)."""
         target = self.prepare(target)
-        jaw, eyes = self.jaw_parts(target), self.eyes(target)
+        jaw, eyes = self.jaw_parts(target), None
         if gaze is not None:
+            eyes = self.eyes(target)
             gaze = np.asarray(gaze, np.float64).reshape(-1, 2, 2)
             if len(gaze) != len(z_ge):
                 raise RetargetError(f"iter_decode: {len(gaze)} gazes for {len(z_ge)} codes")
         for t, frame in enumerate(self._iter_decode_face(target, z_ge, progress)):
             if jaw is not None:
                 frame = jaw.carry(frame)
-            yield frame if eyes is None or gaze is None else eyes.pose(frame, gaze[t])
+            yield frame if eyes is None else eyes.pose(frame, gaze[t])
 
     def _iter_decode_face(self, target: Target, z_ge, progress: bool = False):
         """``iter_decode`` with every part beside the face at rest (the decoder's output alone)."""
@@ -1018,9 +1028,7 @@ class Retargeter:
         z = self.encode(source, source_neutral, progress)
         if not refine:
             return z, np.clip(z[..., :N_FACS], 0.0, 1.0)
-        w, f = self.refine_fit(source, source_neutral, z, prior, sparsity, joint, reweight)
-        z_fit = self.rig_codes(w, f, self.source_rig(source_neutral).target).reshape(np.shape(z))
-        return z_fit, w.reshape(np.shape(z)[:-1] + (N_FACS,))
+        return self._refined(source, source_neutral, z, prior, sparsity, joint, reweight)
 
     def expression(self, source, source_neutral: Mesh | None = None, smooth: str | None = None,
                    fps: float = 30.0, progress: bool = False,
@@ -1068,6 +1076,10 @@ class Retargeter:
             if weights is None:
                 raise RetargetError("source_gaze: the source has no eyeballs; give the weights")
             return gaze_from_weights(np.asarray(weights, np.float64).reshape(-1, N_FACS))
+        return self._measured_gaze(eyes, frames, source_neutral)
+
+    def _measured_gaze(self, eyes: Eyes, frames, source_neutral: Mesh | None) -> np.ndarray:
+        """``source_gaze`` of a source with eyeballs ``eyes`` (``source_eyes``): (T,2,2) radians."""
         frames, _ = source_frames(frames)
         neutral = None if source_neutral is None else as_mesh(source_neutral, role="source neutral")
         if self.stabilise and (neutral is not None or len(frames) > 1):
@@ -1102,9 +1114,16 @@ class Retargeter:
         """Drive a target from FACS weights: (53,) or (T,53) arrays in ICT order, or a dict / list
         of dicts {ICT name: value} -> (V,3) or (T,V,3), decoded from ``weight_codes``; its
         eyeballs turn with the looks (``retarget.eyes.gaze_from_weights``)."""
+        w = weights_array(weights)
+        frames = np.stack(list(self.iter_animate(target, w.reshape(-1, N_FACS), progress)))
+        return frames[0] if w.ndim == 1 else frames
+
+    def iter_animate(self, target, weights, progress: bool = False):
+        """``animate`` one frame at a time (``iter_decode``): weights (T,53) (as ``weights_array``
+        takes them) -> yields (V,3) float64."""
         target = self.prepare(target)
-        return self.decode(target, self.weight_codes(weights, target), progress,
-                           gaze_from_weights(weights_array(weights)))
+        w = weights_array(weights).reshape(-1, N_FACS)
+        yield from self.iter_decode(target, self.weight_codes(w, target), progress, gaze_from_weights(w))
 
     def weight_codes(self, weights, target) -> np.ndarray:
         """FACS weights (as ``weights_array`` takes them) -> the codes z_GE that draw them on

@@ -191,7 +191,7 @@ def print_notes(r, target=None, target_name: str = "", frames=None, neutral=None
     if frames is not None:
         ref = neutral if neutral is not None else frames[0]
         src = r.source_topology(ref, neutral=neutral is not None)
-        eyes = r.source_eyes(frames, neutral) if src.face is not None else None
+        eyes = r.source_eyes(frames, neutral)
         heads.append((source_name, src.canon, src.face, ref.n_vertices, "are left out" + (
             "" if eyes is None else f", but for the turn of its two eyeballs ({eyes.parts} part(s)), "
                                     "which gives the gaze")))

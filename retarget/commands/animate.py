@@ -3,7 +3,6 @@ from __future__ import annotations
 
 from ._common import (add_model_args, output_paths, print_notes, read_weights_file, retargeter,
                       write_frames)
-from ..eyes import gaze_from_weights
 from .export_rig import add_usd_arg, check_usd_output, write_rig
 
 HELP = "drive the neutral TGT from FACS weights (ICT/ARKit CSV, Live Link Face CSV, JSON)"
@@ -52,8 +51,7 @@ def run(args) -> int:
               f"frame(s)")
         return 0
     verts = (r.bake(tgt).evaluate(track.weights) if args.baked
-             else r.iter_decode(tgt, r.weight_codes(track.weights, tgt), progress=True,
-                                gaze=gaze_from_weights(track.weights)))
+             else r.iter_animate(tgt, track.weights, progress=True))
     written = write_frames(args.out, verts, target.faces, inputs, args, fps=track.fps or 30.0,
                            n_frames=n)
     print(f"wrote {n} frame(s) to {written[0] if len(written) == 1 else args.out}")
