@@ -584,7 +584,9 @@ def upright_fit(vertices: np.ndarray, faces: np.ndarray,
     as the MakeHuman training heads do, and the RMS point-to-plane distance (canonical units) of
     the face model (:func:`upright_face_model`) fitted to it. From each start of
     ``UPRIGHT_STARTS`` the mesh is turned, put in its face frame and the model fitted by ICP
-    (:func:`_icp`); the best fit is refined. ``settle``: return the first start's (upright) coarse
+    (:func:`_icp`); the best fit is refined. A start from which the face frame cannot be fitted
+    (a bust pitched up, whose chest then leads) is skipped; with none left the head counts as
+    not fitted (identity, RMS inf). ``settle``: return the first start's (upright) coarse
     fit at once when it fits well and reads under ``UPRIGHT_SETTLE`` of both turning thresholds
     (:func:`upright_rotation` would leave such a head: 0.055 s instead of 0.32 s for an
     11,000-vertex head). vertices (V,3) float64
@@ -601,7 +603,10 @@ def upright_fit(vertices: np.ndarray, faces: np.ndarray,
     fits = []
     for pitch, yaw in UPRIGHT_STARTS:
         start = turn_matrix(pitch, yaw)
-        cv = Canonicaliser.fit(v, kind="face", faces=faces, rotation=start).to_canonical(v)
+        try:
+            cv = Canonicaliser.fit(v, kind="face", faces=faces, rotation=start).to_canonical(v)
+        except RetargetError:
+            continue     # no face frame from this start (a bust turned up: its chest leads)
         points, normals = cv[used], vertex_normals(cv, faces)[used]
         tree = cKDTree(points)
         fit = _icp(tree, points, normals, UPRIGHT_COARSE_STEPS, np.eye(3), np.zeros(3),
@@ -612,6 +617,8 @@ def upright_fit(vertices: np.ndarray, faces: np.ndarray,
                     and side_read < UPRIGHT_SETTLE * UPRIGHT_MIN_SIDE):
                 return fit[0].T @ start, fit[-1]
         fits.append((fit[-1], start, tree, points, normals, fit))
+    if not fits:
+        return np.eye(3), float("inf")
     _, start, tree, points, normals, (r, t, c, _) = min(fits, key=lambda f: f[0])
     r, _, _, rms = _icp(tree, points, normals, UPRIGHT_STEPS, r, t, c)
     return r.T @ start, rms                      # the model turned by r fits: undo r

@@ -248,6 +248,23 @@ def test_upright_fit_finds_how_a_head_is_turned(pitch, yaw):
     assert rms < 0.1
 
 
+def test_upright_fit_skips_a_start_without_a_face_frame():
+    """A MakeHuman training bust (seed 452) pitched up by the −20° start has its chest in front:
+    the face frame refuses that start, and the fit goes on from the others."""
+    from data_synth.makehuman import head_tessellation, sample_head_identity
+    from data_synth.makehuman.identity import head_neutral
+    from retarget.canonical import UPRIGHT_STARTS
+    from retarget.errors import RetargetError
+    tess = head_tessellation(seed=452, n_vertices=2000, kind="jittered", crop="bust")
+    v = tess.apply(head_neutral(sample_head_identity(452, "train"), "bust")).astype(np.float64)
+    assert (-20.0, 0.0) in UPRIGHT_STARTS
+    with pytest.raises(RetargetError, match="faces forward"):
+        Canonicaliser.fit(v, kind="face", faces=tess.faces, rotation=turn_matrix(-20.0, 0.0))
+    rotation, rms = upright_fit(v, tess.faces)
+    assert np.isfinite(rms) and rotation_angle(rotation) < 3.0
+    assert upright_rotation(v, tess.faces) is None          # an upright bust stays as it is
+
+
 def test_upright_rotation_turns_only_tilted_human_heads():
     v, f = arkit_neutral()
     assert upright_rotation(v, f) is None                                  # upright
