@@ -43,7 +43,7 @@ from nets.model import NFSModel, TargetCodes, weights_to_code
 
 from .canonical import Canonicaliser, upright_rotation
 from .checkpoint import checkpoint_code_map, load_checkpoint, model_from_checkpoint
-from .code_map import check_code_map, check_gate, head_code_map
+from .code_map import check_code_map, check_gate, check_per_head, head_code_map
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
 from .eyes import Eyes, find_eyes, gaze_from_weights, weights_from_gaze
@@ -465,16 +465,18 @@ class Retargeter:
     def __init__(self, model: NFSModel, device=None, proxy_vertices: int = 20000,
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
                  refine_steps: int = 0, code_map: np.ndarray | None = None,
-                 code_map_gate: np.ndarray | None = None, upright: bool = True,
+                 code_map_gate: np.ndarray | None = None, code_map_per_head: tuple | None = None,
+                 upright: bool = True,
                  face_only: bool = True, stabilise: bool = True, carry_jaw: bool = True,
                  turn_eyes: bool = True):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
         self._source_rigs: dict[tuple, SourceRig] = {}
-        self._code_map_gate = None
+        self._code_map_gate = self._code_map_per_head = None
         self.code_map = code_map
         self.code_map_gate = code_map_gate
+        self.code_map_per_head = code_map_per_head
         self.proxy_vertices = proxy_vertices
         self.chunk = chunk
         self.cache_dir = cache_dir
@@ -519,14 +521,31 @@ class Retargeter:
             raise RetargetError(str(e)) from None
         self._source_rigs.clear()
 
+    @property
+    def code_map_per_head(self) -> tuple | None:
+        """The per-head part of the code map, (features (d + 1, code_dim), slopes (d, code_dim,
+        53)) float32, or None: each head's map is then ``code_map`` moved along its identity
+        code's d whitened principal components (``retarget.code_map.HeadMapFit``). Setting it
+        drops the source rigs baked so far."""
+        return self._code_map_per_head
+
+    @code_map_per_head.setter
+    def code_map_per_head(self, value) -> None:
+        try:
+            self._code_map_per_head = check_per_head(value, self.cfg)
+        except ValueError as e:
+            raise RetargetError(str(e)) from None
+        self._source_rigs.clear()
+
     def head_code_map(self, target) -> np.ndarray | None:
         """The code map of one prepared target (code_dim, 53) float32 (``retarget.code_map``:
-        the map itself, or, with a gate, moved from the paper's map towards it by how
-        MakeHuman-like the target's z_ID is), or None without a map."""
+        the map itself; with a per-head part, moved along the target's z_ID; with a gate, moved
+        from the paper's map towards it by how MakeHuman-like the target's z_ID is), or None
+        without a map."""
         if self.code_map is None:
             return None
         return head_code_map(self.code_map, self.code_map_gate,
-                             target.codes.z_id.detach().cpu().numpy())
+                             target.codes.z_id.detach().cpu().numpy(), self.code_map_per_head)
 
     @classmethod
     def load(cls, path=None, device=None, **kwargs) -> "Retargeter":
@@ -539,9 +558,10 @@ class Retargeter:
                                     "train` or pass --checkpoint")
         path = Path(path)
         state = load_checkpoint(path)
-        code_map, gate = checkpoint_code_map(state)
+        code_map, gate, per_head = checkpoint_code_map(state)
         kwargs.setdefault("code_map", code_map)
         kwargs.setdefault("code_map_gate", gate)
+        kwargs.setdefault("code_map_per_head", per_head)
         return cls(model_from_checkpoint(state, path), device, **kwargs)
 
     # --------------------------------------------------------------------------- preparation

@@ -18,7 +18,7 @@ import torch
 from data_synth.facs import N_FACS
 from nets.model import NEUTRAL_CHANNEL_DIM, NFSConfig, NFSModel
 
-from .code_map import check_code_map, check_gate
+from .code_map import check_code_map, check_gate, check_per_head
 from .errors import RetargetError
 from .io import atomic_output, regular_file
 from .prepare import IMAGE_CHANNELS
@@ -105,21 +105,43 @@ def check_state(state: dict, path="checkpoint") -> None:
             ok = False
         if not ok:
             raise RetargetError(f"{path}: the checkpoint's {key} is not a finite {what}")
+    head_keys = [k for k in ("code_map_features", "code_map_slopes") if k in state]
+    if head_keys:
+        ok = len(head_keys) == 2 and "code_map" in state and all(
+            isinstance(state[k], torch.Tensor) for k in head_keys)
+        try:
+            ok = ok and check_per_head(tuple(state[k].detach().cpu().numpy() for k in head_keys),
+                                       cfg) is not None
+        except ValueError:
+            ok = False
+        if not ok:
+            raise RetargetError(f"{path}: the checkpoint's per-head code map is not a pair of finite "
+                                f"tensors code_map_features (d + 1, {cfg.code_dim}) and "
+                                f"code_map_slopes (d, {cfg.code_dim}, {cfg.n_facs}) beside a "
+                                "code_map")
 
 
 def checkpoint_code_map(state: dict):
-    """The checked checkpoint's code map (code_dim, 53) and its gate (code_dim + 1,), float32 numpy
-    arrays (``retarget.code_map``); None for what it lacks."""
-    return tuple(None if state.get(k) is None else state[k].detach().cpu().float().numpy()
-                 for k in ("code_map", "code_map_gate"))
+    """The checked checkpoint's code map (code_dim, 53), its gate (code_dim + 1,) and its per-head
+    part (features (d + 1, code_dim), slopes (d, code_dim, 53)), float32 numpy arrays
+    (``retarget.code_map``); None for what it lacks."""
+    code_map, gate, features, slopes = (
+        None if state.get(k) is None else state[k].detach().cpu().float().numpy()
+        for k in ("code_map", "code_map_gate", "code_map_features", "code_map_slopes"))
+    return code_map, gate, (None if features is None else (features, slopes))
 
 
-def put_code_map(state: dict, code_map: np.ndarray, gate: np.ndarray | None) -> dict:
-    """``state`` with a code map (code_dim, 53) and its gate (code_dim + 1,) or None (no gate) put
-    in as the tensors ``checkpoint_code_map`` reads back; returns ``state``."""
+def put_code_map(state: dict, code_map: np.ndarray, gate: np.ndarray | None,
+                 per_head: tuple | None = None) -> dict:
+    """``state`` with a code map (code_dim, 53), its gate (code_dim + 1,) or None (no gate) and its
+    per-head part (features, slopes) or None put in as the tensors ``checkpoint_code_map`` reads
+    back; returns ``state``."""
     state["code_map"] = torch.from_numpy(np.asarray(code_map, np.float32))
     if gate is not None:
         state["code_map_gate"] = torch.from_numpy(np.asarray(gate, np.float32))
+    if per_head is not None:
+        state["code_map_features"] = torch.from_numpy(np.asarray(per_head[0], np.float32))
+        state["code_map_slopes"] = torch.from_numpy(np.asarray(per_head[1], np.float32))
     return state
 
 

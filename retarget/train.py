@@ -71,8 +71,9 @@ DEFAULTS = {
     "optim": {"lr": 1e-3, "weight_decay": 1e-4, "warmup_steps": 100, "grad_clip": 1.0},
     # the code map fitted into model.pt at export (retarget.code_map; basis decoder): this many
     # MakeHuman and as many procedural training identities from seed ``seed``; 0 = none. gated:
-    # the map of the MakeHuman heads, given to each head by a gate on its identity code
-    "code_map": {"identities": 0, "seed": 0, "ridge": 0.01, "gated": False},
+    # the map of the MakeHuman heads, given to each head by a gate on its identity code;
+    # features d > 0: the map of each head linear in d principal components of its identity code
+    "code_map": {"identities": 0, "seed": 0, "ridge": 0.01, "gated": False, "features": 0},
     "train": {"steps": 1000, "max_minutes": 0, "seed": 0, "log_every": 10, "val_every": 200,
               "ckpt_minutes": 5.0,
               # processes preparing the samples of the next steps (retarget.prefetch); 0 = in the
@@ -127,7 +128,7 @@ VALUE_RULES = {
     ("data", "rig_targets"): (int, 1, 64, True),
     **{("loss", k): (float, 0.0, None, True) for k in DEFAULTS["loss"]},
     ("code_map", "identities"): (int, 0, 10000, True), ("code_map", "seed"): (int, 0, None, True),
-    ("code_map", "ridge"): (float, 0.0, None, False),
+    ("code_map", "ridge"): (float, 0.0, None, False), ("code_map", "features"): (int, 0, 10000, True),
 }
 
 
@@ -485,17 +486,17 @@ class Trainer:
                 put_code_map(state, *self.fit_code_map())
             save_checkpoint(path, state)
 
-    def fit_code_map(self) -> tuple[np.ndarray, np.ndarray | None]:
-        """The code map (code_dim, 53) float32 of the model as it is now and its gate (or None), on
-        the config's ``code_map`` training identities (``retarget.code_map.fit_code_map``); the
-        model's mode is kept."""
+    def fit_code_map(self) -> tuple[np.ndarray, np.ndarray | None, tuple | None]:
+        """The code map (code_dim, 53) float32 of the model as it is now, its gate (or None) and
+        its per-head part (or None), on the config's ``code_map`` training identities
+        (``retarget.code_map.fit_code_map``); the model's mode is kept."""
         from .api import Retargeter
         from .code_map import fit_code_map
 
         c, was_training = self.cfg["code_map"], self.model.training
         try:
             return fit_code_map(Retargeter(self.model, self.device), c["identities"], c["seed"],
-                                c["ridge"], c["gated"])
+                                c["ridge"], c["gated"], c["features"])
         finally:
             self.model.train(was_training)
 

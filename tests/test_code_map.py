@@ -14,7 +14,7 @@ from nets.model import NFSConfig, NFSModel
 from retarget import FACS_NAMES
 from retarget.api import Retargeter, basis_shapes
 from retarget.checkpoint import load_checkpoint, save_checkpoint
-from retarget.code_map import CodeMapFit, fit_gate, gate_probability, head_code_map
+from retarget.code_map import CodeMapFit, HeadMapFit, fit_gate, gate_probability, head_code_map
 from retarget.errors import RetargetError
 from retarget.mesh import Mesh
 from retarget.train import Trainer, load_config
@@ -171,9 +171,9 @@ def test_training_fits_the_map_into_the_exported_model(tmp_path):
     assert np.abs(m - np.eye(128, 53)).max() > 1e-3      # fitted, not the paper's map
     assert "code_map" not in load_checkpoint(tmp_path / "run" / "last.pt")
     assert trainer.model.training                          # the fit leaves the model training
-    again, gate = trainer.fit_code_map()
+    again, gate, per_head = trainer.fit_code_map()
     np.testing.assert_allclose(again, m, rtol=1e-5, atol=1e-6)                   # deterministic
-    assert gate is None and "code_map_gate" not in load_checkpoint(tmp_path / "run" / "model.pt")
+    assert gate is None and per_head is None and "code_map_gate" not in load_checkpoint(tmp_path / "run" / "model.pt")
 
 
 def test_a_map_needs_the_basis_decoder_in_the_config(tmp_path):
@@ -186,6 +186,9 @@ def test_a_map_needs_the_basis_decoder_in_the_config(tmp_path):
         load_config(bad)
     bad.write_text(f"base: {TINY_TRAIN}\nmodel: {{decoder: basis}}\ncode_map: {{gated: 1}}\n")
     with pytest.raises(RetargetError, match=r"code_map\.gated must be true or false"):
+        load_config(bad)
+    bad.write_text(f"base: {TINY_TRAIN}\nmodel: {{decoder: basis}}\ncode_map: {{features: -1}}\n")
+    with pytest.raises(RetargetError, match=r"code_map\.features"):
         load_config(bad)
 
 
@@ -324,3 +327,83 @@ def test_invert_fits_with_the_settings_tuned_with_or_without_a_map():
     assert fits[True] != fits[False]
     r.code_map = None
     assert r.REFINE_PRIOR_INVERT == fits[False][0]
+
+
+# ------------------------------------------------------------------------------- per head
+def test_the_per_head_fit_recovers_maps_linear_in_the_identity_code():
+    """Heads whose true map is M_0 + Σ_j φ_j(z) S_j: the fit finds each held-out head's map, and
+    with d = 0 features it cannot (one map for all)."""
+    rng = np.random.default_rng(0)
+    dims = 60
+    m0 = np.eye(dims, 53) + 0.2 * rng.normal(size=(dims, 53))
+    slope = rng.normal(size=(2, dims, 53))
+    basis = rng.normal(size=(2, dims))                     # the codes vary in a 2-d subspace
+
+    def head(seed):
+        r = np.random.default_rng(seed)
+        coeffs = r.normal(size=2)
+        z = 3.0 + coeffs @ basis
+        truth = m0 + np.tensordot(coeffs, slope, 1)
+        x = r.normal(size=(dims, 80))
+        return z, truth, x, truth.T @ x
+
+    fit = HeadMapFit()
+    for h in range(30):
+        z, _, x, b = head(h)
+        fit.add(x, b, z)
+    m, per_head = fit.solve(8, 1e-10)
+    features, slopes = per_head
+    assert features.shape == (3, dims) and slopes.shape == (2, dims, 53)   # only 2 components span
+    z, truth, _, _ = head(100)
+    np.testing.assert_allclose(head_code_map(m, None, z, per_head), truth, atol=1e-3)
+    shared = fit.solve(0, 1e-10)[0]
+    assert np.abs(shared - truth).max() > 0.1
+
+
+def test_a_per_head_map_travels_in_the_checkpoint_and_is_drawn_per_head(rig, tmp_path):
+    path = tiny_checkpoint(tmp_path / "basis.pt", decoder="basis", decoder_fourier=2)
+    state = load_checkpoint(path)
+    m = random_map(128)
+    rng = np.random.default_rng(3)
+    features = np.r_[rng.normal(size=(1, 128)), 0.1 * rng.normal(size=(2, 128))].astype(np.float32)
+    slopes = (0.05 * rng.normal(size=(2, 128, 53))).astype(np.float32)
+    state["code_map"] = torch.from_numpy(m)
+    state["code_map_features"], state["code_map_slopes"] = torch.from_numpy(features), torch.from_numpy(slopes)
+    save_checkpoint(tmp_path / "per_head.pt", state)
+    r = Retargeter.load(tmp_path / "per_head.pt", device="cpu")
+    neutral = Mesh(rig.neutral, rig.faces)
+    z = r.prepare(neutral).codes.z_id.numpy().astype(np.float64)
+    expected = m + np.tensordot(features[1:] @ (z - features[0]), slopes, 1)
+    np.testing.assert_allclose(r.head_code_map(r.prepare(neutral)), expected, rtol=1e-4, atol=1e-5)
+    w = np.random.default_rng(1).random(53).astype(np.float32)
+    np.testing.assert_allclose(r.weight_codes(w, neutral), expected @ w, rtol=1e-4, atol=1e-5)
+    # with a gate, the per-head map is drawn as far as the gate says: here p = 1/4
+    gate = np.r_[np.zeros(128), -np.log(3.0)].astype(np.float32)
+    r.code_map_gate = gate
+    eye = np.eye(128, 53)
+    np.testing.assert_allclose(r.head_code_map(r.prepare(neutral)), eye + 0.25 * (expected - eye),
+                               rtol=1e-4, atol=1e-5)
+    # a half-given or misshapen per-head map is refused, naming the file
+    del state["code_map_slopes"]
+    save_checkpoint(tmp_path / "half.pt", state)
+    with pytest.raises(RetargetError, match=r"half\.pt: the checkpoint's per-head code map"):
+        Retargeter.load(tmp_path / "half.pt", device="cpu")
+    state["code_map_slopes"] = torch.zeros(2, 128, 52)
+    save_checkpoint(tmp_path / "bad.pt", state)
+    with pytest.raises(RetargetError, match=r"bad\.pt: the checkpoint's per-head code map"):
+        Retargeter.load(tmp_path / "bad.pt", device="cpu")
+    with pytest.raises(RetargetError, match="per-head code map"):
+        r.code_map_per_head = (features, slopes[:1])
+
+
+def test_training_fits_a_per_head_map(tmp_path):
+    cfg = load_config(TINY_TRAIN)
+    cfg["train"]["steps"] = 1
+    cfg["model"].update(decoder="basis", decoder_fourier=2)
+    cfg["code_map"].update(identities=2, features=2, ridge=0.001, gated=True)
+    Trainer(cfg, tmp_path / "run", progress=False).run()
+    state = load_checkpoint(tmp_path / "run" / "model.pt")
+    assert state["code_map_features"].shape[1] == 128 and state["code_map_slopes"].shape[1:] == (128, 53)
+    assert state["code_map_gate"].shape == (129,)
+    r = Retargeter.load(tmp_path / "run" / "model.pt", device="cpu")
+    assert r.code_map_per_head is not None and r.code_map_gate is not None
