@@ -28,11 +28,12 @@ heads like the realistic training heads, the paper's map on heads unlike them.
 A *per-head* map goes further: each head's map is linear in the whitened principal components of
 its identity code, M(z) = M_0 + Σ_j φ_j(z) S_j, φ(z) = Pᵀ (z − μ) (d of them; ``HeadMapFit``,
 checkpoint ``code_map`` = M_0 and ``code_map_per_head`` = (features [μ; Pᵀ] (d + 1, code_dim),
-slopes S (d, code_dim, 53))). Gated, it is fitted on the MakeHuman heads and given to each head
-as the gate says (the bundled map). On held-out MakeHuman validation heads it takes the shapes'
-relative error from 0.252 (one map) to 0.242 with d = 16 (each head's own best map: 0.203); most
-of what is left is the mesh's, not the identity's: one head on three crops has identity codes
-further apart than two heads on one (docs/RESULTS.md, "Code maps per head").
+slopes S (d, code_dim, 53))), fitted on both kinds of heads or, gated, on the MakeHuman heads
+and given to each head as the gate says. Not bundled (docs/RESULTS.md, "Code maps per head"): on
+held-out MakeHuman validation heads it takes the shapes' relative error from 0.252 (one map) to
+0.242 with d = 16 (each head's own best map: 0.203), which helps the realistic heads' weights a
+little and costs the procedural heads'; most of what is left is the mesh's, not the identity's:
+one head on three crops has identity codes further apart than two heads on one.
 """
 from __future__ import annotations
 
