@@ -1,6 +1,6 @@
 """`retarget eval` with a per-head code map fitted from the cached training heads (``cache.py``)
 in place of the checkpoint's map (study, issue 10): the map of 16 whitened principal components
-(``fit.py``, ridge 0.001) on the first 400 heads of each cache given, drawn on every head from its
+(``fit.py``, ridge 0.001) on the first ``--heads`` (400) heads of each cache given, drawn on every head from its
 own z_ID; with ``--gated`` given to each head as the checkpoint's gate says, with ``--clip C`` its
 components clipped to ±C. The rest of the command line goes to ``retarget eval``. The map equals the
 one `retarget train` fits from the same heads (``HeadMapFit``: within 1e-7 on the ARKit head).
@@ -27,10 +27,11 @@ def main():
     ap.add_argument("--caches", nargs="+", required=True)
     ap.add_argument("--gated", action="store_true")
     ap.add_argument("--clip", type=float, default=None)
+    ap.add_argument("--heads", type=int, default=400, help="heads of each cache the map is fitted on")
     ap.add_argument("rest", nargs=argparse.REMAINDER)
     args = ap.parse_args()
     parts = [load([p]) for p in args.caches]
-    train = {k: np.concatenate([p[k][:400] for p in parts]) for k in parts[0]}
+    train = {k: np.concatenate([p[k][:args.heads] for p in parts]) for k in parts[0]}
     feats = Features(train["z_id"], 16)
     a = fit_linear(train, feats, 0.001)
     eye = np.eye(a.shape[1], 53)
