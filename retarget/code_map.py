@@ -278,7 +278,10 @@ def fit_code_map(r, identities: int, seed: int = 0, ridge: float = 0.01, gated: 
         makehuman = kind == "makehuman"
         if makehuman or not gated:
             b = np.asarray(rig.deltas).reshape(len(rig.deltas), -1)
-            fit.add(rows, b, z_id) if features else fit.add(rows, b)
+            if features:
+                fit.add(rows, b, z_id)
+            else:
+                fit.add(rows, b)
         z_ids.append(z_id)
         labels.append(makehuman)
     gate = fit_gate(np.array(z_ids), np.array(labels)) if gated else None
