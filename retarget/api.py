@@ -1105,7 +1105,7 @@ class Retargeter:
         if self.stabilise and (neutral is not None or len(frames) > 1):
             frames = self.stabilise_frames(frames, neutral or frames[0])[0]
         gaze = np.stack([eyes.measure(f.vertices) for f in frames])
-        if neutral is None:     # against the first frame: ahead is where the take looks on average
+        if neutral is None:     # against the take's median gaze: ahead is where it looks on average
             gaze -= np.median(gaze, axis=0)
         return gaze
 

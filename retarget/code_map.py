@@ -73,7 +73,7 @@ def check_per_head(per_head, cfg) -> tuple[np.ndarray, np.ndarray] | None:
         features, slopes = (np.asarray(a, np.float32) for a in per_head)
     except (TypeError, ValueError):
         raise ValueError("a per-head code map is a pair (features, slopes) of arrays") from None
-    d = len(slopes)
+    d = slopes.shape[0] if slopes.ndim else 0
     if (features.shape != (d + 1, cfg.code_dim) or slopes.shape != (d, cfg.code_dim, N_FACS) or d < 1
             or not (np.isfinite(features).all() and np.isfinite(slopes).all())):
         raise ValueError(f"a per-head code map needs finite features (d + 1, {cfg.code_dim}) and "
@@ -142,16 +142,22 @@ class HeadMapFit:
         """One head: x (dims, n) the decoder's rig rows, b (53, n) the true shapes (a shape the rig
         lacks is all zero), z_id (dims,) its identity code."""
         x, b = np.asarray(x, np.float64), np.asarray(b, np.float64)
-        self.z_ids.append(np.asarray(z_id, np.float64))
-        self.grams.append(x @ x.T)
-        self.crosses.append(x @ b.T)
-        self.norms.append((b ** 2).sum(1))
+        self.add_normal_equations(z_id, x @ x.T, x @ b.T, (b ** 2).sum(1))
 
-    def solve(self, features: int, ridge: float) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    def add_normal_equations(self, z_id, gram, cross, norm2) -> None:
+        """One head by what the fit keeps of it: z_id (dims,), G (dims, dims), C (dims, 53),
+        n (53,) (class docstring; e.g. cached once for many fits)."""
+        self.z_ids.append(np.asarray(z_id, np.float64))
+        self.grams.append(np.asarray(gram, np.float64))
+        self.crosses.append(np.asarray(cross, np.float64))
+        self.norms.append(np.asarray(norm2, np.float64))
+
+    def solve(self, features: int,
+              ridge: float) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
         """(M_0 (dims, 53), (features [μ; Pᵀ] (d + 1, dims), slopes (d, dims, 53))) float32 with
         d = ``features`` whitened principal components of the heads' identity codes (fewer when
-        the heads span fewer; None for the pair when they span none); ridge λ_k = ``ridge`` × the mean diagonal of shape k's normal
-        equations."""
+        the heads span fewer; None for the pair when they span none); ridge λ_k = ``ridge`` × the
+        mean diagonal of shape k's normal equations."""
         z, g = np.array(self.z_ids), np.array(self.grams)
         c, n = np.array(self.crosses), np.array(self.norms)
         heads, dims = z.shape

@@ -394,6 +394,8 @@ def test_a_per_head_map_travels_in_the_checkpoint_and_is_drawn_per_head(rig, tmp
         Retargeter.load(tmp_path / "bad.pt", device="cpu")
     with pytest.raises(RetargetError, match="per-head code map"):
         r.code_map_per_head = (features, slopes[:1])
+    with pytest.raises(RetargetError, match="per-head code map"):
+        r.code_map_per_head = (features, np.float32(1.0))       # not an array of slopes at all
 
 
 def test_training_fits_a_per_head_map(tmp_path):

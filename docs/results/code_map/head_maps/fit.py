@@ -4,7 +4,8 @@
 Each map is m_k(z) = A_k φ̃(z), φ̃ = [1, the first d whitened principal components of the training
 heads' z_ID]; d = 0 is one map shared by every head (the bundled kind). A_k is the ridge
 least-squares fit of Σ_h |X_hᵀ m_k(z_h) − B_hk|² / |B_hk|² over the training heads, pulled towards
-the paper's map [e_k, 0, ...] by ``ridge`` × the mean diagonal of the normal equations. Printed:
+the paper's map [e_k, 0, ...] by ``ridge`` × the mean diagonal of the normal equations
+(``retarget.code_map.HeadMapFit``, the fit ``retarget train`` makes with ``code_map.features``). Printed:
 the median over held-out heads and shapes of |X_hᵀ m_k − B_hk| / |B_hk|, beside the paper's map
 e_k and each head's own best map (the oracle).
 
@@ -15,6 +16,8 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+
+from retarget.code_map import HeadMapFit, head_code_map
 
 
 def load(paths):
@@ -32,46 +35,18 @@ def relative_errors(maps, data):
         return np.where(n > 0, np.sqrt(err2 / n), np.nan)
 
 
-class Features:
-    """φ̃(z) = [1, whitened principal components 1..d of the training heads' z_ID]."""
-
-    def __init__(self, z, d):
-        self.mean = z.mean(0)
-        _, s, vt = np.linalg.svd(z - self.mean, full_matrices=False)
-        self.proj = vt[:d].T / (s[:d] / np.sqrt(len(z)))
-
-    def __call__(self, z):
-        return np.c_[np.ones(len(z)), (z - self.mean) @ self.proj]
+def fit_map(train, d, ridge):
+    """(M_0, per-head (features, slopes) or None): ``retarget.code_map.HeadMapFit`` on the cached
+    heads ``train``, d whitened principal components of z_ID (0: one map), ridge ``ridge``."""
+    fit = HeadMapFit()
+    for z, g, c, n in zip(train["z_id"], train["gram"], train["cross"], train["norm2"]):
+        fit.add_normal_equations(z, g, c, n)
+    return fit.solve(d, ridge)
 
 
-def fit_linear(train, feats, ridge):
-    """A (53, dims, 1 + d): the ridge fit of m_k(z) = A_k φ̃(z) (module docstring)."""
-    phi = feats(train["z_id"])                                  # (H, p)
-    g, c, n = train["gram"], train["cross"], train["norm2"]
-    h, dims, _ = g.shape
-    p = phi.shape[1]
-    a = np.zeros((53, dims, p))
-    outer = (phi[:, :, None] * phi[:, None, :]).reshape(h, -1)  # (H, p²)
-    for k in range(53):
-        use = n[:, k] > 0
-        target = np.zeros((dims, p)); target[k, 0] = 1.0
-        if not use.any():
-            a[k] = target
-            continue
-        w = 1.0 / n[use, k]
-        # normal matrix over vec(A) ordered (dims, p): Σ_h w_h G_h ⊗ φ̃φ̃ᵀ
-        big = ((outer[use] * w[:, None]).T @ g[use].reshape(use.sum(), -1))     # (p², dims²)
-        big = big.reshape(p, p, dims, dims).transpose(2, 0, 3, 1).reshape(dims * p, dims * p)
-        rhs = np.einsum("h,hi,ha->ia", w, c[use, :, k], phi[use]).reshape(-1)
-        lam = ridge * np.trace(big) / (dims * p)
-        sol = np.linalg.solve(big + lam * np.eye(dims * p), rhs + lam * target.reshape(-1))
-        a[k] = sol.reshape(dims, p)
-    return a
-
-
-def maps_of(a, feats, z):
-    """(H, dims, 53) maps of heads with codes z."""
-    return np.einsum("kip,hp->hik", a, feats(z))
+def maps_of(m0, per_head, z):
+    """(H, dims, 53) the maps (``retarget.code_map.head_code_map``, no gate) of heads with codes z."""
+    return np.stack([head_code_map(m0, None, z_h, per_head) for z_h in z]).astype(np.float64)
 
 
 def oracle(data, ridge=1e-6):
@@ -103,11 +78,10 @@ def main():
         e, et = relative_errors(m, test), relative_errors(mt, train)
         print(f"| {name} | {np.nanmedian(e):.4f} | {np.nanmean(e):.4f} | {np.nanmedian(et):.4f} |", flush=True)
     for d in args.dims:
-        feats = Features(train["z_id"], d)
         for ridge in args.ridges:
-            a = fit_linear(train, feats, ridge)
-            e = relative_errors(maps_of(a, feats, test["z_id"]), test)
-            et = relative_errors(maps_of(a, feats, train["z_id"]), train)
+            m0, per_head = fit_map(train, d, ridge)
+            e = relative_errors(maps_of(m0, per_head, test["z_id"]), test)
+            et = relative_errors(maps_of(m0, per_head, train["z_id"]), train)
             print(f"| d = {d}, ridge {ridge:g} | {np.nanmedian(e):.4f} | {np.nanmean(e):.4f} | {np.nanmedian(et):.4f} |", flush=True)
 
 

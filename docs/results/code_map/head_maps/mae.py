@@ -2,7 +2,8 @@
 against the checkpoint's own map (study, issue 10).
 
 Fits m_k(z) = A_k φ̃(z) on the cached training heads (``cache.py``) for each (d, ridge) asked, puts
-it in place of the checkpoint's map (every head's map from its own z_ID, no gate), and runs
+it in place of the checkpoint's map (``Retargeter.code_map_per_head``: every head's map from its
+own z_ID, no gate), and runs
 invert's fit with refine on the inversion cases of ``--config`` (``breakdown.py``), printing the
 weight MAE by kind of row and the baked shapes' median relative error per suite.
 
@@ -13,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import types
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +22,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parents[1] / "weight_mae"))
 from breakdown import by_kind, inversion_rows, shape_errors  # noqa: E402
-from fit import Features, fit_linear, load  # noqa: E402
+from fit import fit_map, load  # noqa: E402
 
 from retarget.api import Retargeter  # noqa: E402
 from retarget.evaluate import EvalData, NetworkMethod, load_eval_config  # noqa: E402
@@ -36,14 +36,6 @@ def report(name, r, data, cfg, results):
         print(f"| {name} | {s} | {shapes[s]['median']:.3f} | "
               + " / ".join(f"{t[k]['weight_mae']:.4f}" for k in ("uniform", "onehot", "sparse", "all") if k in t)
               + f" | {t['all']['predict_0_mae']:.4f} | {t['all']['rig_mse_mm2']:.4g} |", flush=True)
-
-
-def per_head(a, feats):
-    """A Retargeter.head_code_map replacement: each target's map from its own z_ID."""
-    def head_code_map(self, target):
-        z = target.codes.z_id.detach().cpu().numpy().astype(np.float64)[None]
-        return np.einsum("kip,p->ik", a, feats(z)[0]).astype(np.float32)
-    return head_code_map
 
 
 def main():
@@ -64,10 +56,8 @@ def main():
     report("bundled (gated map)", r, data, cfg, results)
     for spec in args.models:
         d, ridge = spec.split(":")
-        feats = Features(train["z_id"], int(d))
-        a = fit_linear(train, feats, float(ridge))
-        r.head_code_map = types.MethodType(per_head(a, feats), r)
-        r._source_rigs.clear()
+        m0, per_head = fit_map(train, int(d), float(ridge))
+        r.code_map, r.code_map_gate, r.code_map_per_head = m0, None, per_head
         report(f"per head, d = {d}, ridge {ridge}", r, data, cfg, results)
         if args.out:
             Path(args.out).write_text(json.dumps(results, indent=1))
