@@ -8,6 +8,7 @@ from data_synth.makehuman import (CROPS, base_head_rig, build_head_rig, head_neu
 from data_synth.makehuman import assets
 from data_synth.makehuman.expressions import (SURROGATE_NAMES, base_arkit_ict, base_surrogates_ict,
                                               identity_expressions, jaw_hinge)
+from data_synth.makehuman import transfer
 from data_synth.makehuman.transfer import deformation_transfer
 
 
@@ -40,6 +41,26 @@ def test_deformation_transfer_reproduces_on_its_own_neutral():
     deltas = z["full_deltas"][:4]
     out = deformation_transfer(z["full_neutral"], deltas, z["full_neutral"], z["full_faces"])
     assert np.abs(out - deltas).max() < 1e-4
+
+
+def test_deformation_transfer_reuses_its_factorisations_exactly(monkeypatch):
+    z = assets.arkit()
+    deltas = z["full_deltas"][:3]
+    heads = [head_neutral(sample_head_identity(s, "test"))[:assets.N_HEAD] for s in (2, 3)]
+    monkeypatch.setattr(transfer, "_factors", type(transfer._factors)())
+    monkeypatch.setattr(transfer, "FACTOR_CACHE_BYTES", 0)      # nothing kept: every solve factorises
+    fresh = [deformation_transfer(z["full_neutral"], deltas, h, z["full_faces"]) for h in heads]
+    assert len(transfer._factors) == 0
+    monkeypatch.setattr(transfer, "FACTOR_CACHE_BYTES", 256 * 2**20)
+    cached = [deformation_transfer(z["full_neutral"], deltas, h, z["full_faces"]) for h in heads]
+    assert len(transfer._factors) == 3              # one per shape, reused for the second head
+    for a, b in zip(fresh, cached):
+        assert np.array_equal(a, b)
+    assert not np.allclose(cached[0], cached[1])    # the heads differ, the factors do not
+    one = next(iter(transfer._factors.values()))[1]
+    monkeypatch.setattr(transfer, "FACTOR_CACHE_BYTES", 2 * one)
+    deformation_transfer(z["full_neutral"], z["full_deltas"][3:6], heads[0], z["full_faces"])
+    assert sum(b for _, b in transfer._factors.values()) <= 2 * one   # oldest dropped first
 
 
 def test_transferred_shapes_act_where_the_artist_put_them():

@@ -2,7 +2,8 @@
 (COLAMD, partial pivoting) against the symmetric order and diagonal pivots that
 ``data_synth.makehuman.transfer`` uses for its SPD anchored Laplacian, on the source rigs of
 ``base_head_rig`` (the ARKit and unit shapes of training identities 0..N-1). Prints the seconds of
-each over all rigs and the largest difference of their outputs (cm).
+each over all rigs and the largest difference of their outputs (cm). The factor cache of
+``transfer`` (``FACTOR_CACHE_BYTES``) is switched off, so that every shape is factorised.
 
     OMP_NUM_THREADS=1 python docs/results/synthesis_speed/transfer_order.py --identities 4
 """
@@ -23,6 +24,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--identities", type=int, default=4)
     args = ap.parse_args()
+    transfer.FACTOR_CACHE_BYTES = 0
     calls = []   # the arguments of every deformation_transfer call base_head_rig makes
     solve = transfer.deformation_transfer
     expressions.deformation_transfer = lambda *a: (calls.append(a), solve(*a))[1]
