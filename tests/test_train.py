@@ -503,6 +503,7 @@ def test_init_partial_starts_a_run_from_another_design_and_needs_init(tmp_path):
 COMMITTED_STATES = {"stage17": "configs/train/realistic_rig_heavier.yaml",
                     "stage18": "configs/train/realistic_rig_heavier.yaml",
                     "ablation_no_neutral": "configs/train/realistic_rig_heavier_no_neutral.yaml",
+                    "ablation_no_neutral_19": "configs/train/realistic_rig_authored_no_neutral.yaml",
                     "stage19": "configs/train/realistic_rig_authored.yaml",
                     "stage20": "configs/train/realistic_rig_authored.yaml"}
 
