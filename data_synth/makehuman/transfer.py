@@ -20,8 +20,9 @@ from scipy.sparse.linalg import SuperLU, splu
 ANCHOR_CM = 1e-3      # a vertex that a source shape moves by less than this is anchored for it
 ANCHOR_WEIGHT = 100.0  # anchor weight, relative to one edge equation
 # Factorisations kept per process, least recently used dropped first. The 53 ARKit shapes on the
-# 4,326-vertex MakeHuman head hold about 117 MB; rigs whose source shapes change with the identity
-# (MakeHuman's expression units, by race) miss and replace them.
+# 4,326-vertex MakeHuman head hold about 115 MB (docs/results/synthesis_speed/transfer_cache.txt);
+# rigs whose source shapes change with the identity (MakeHuman's expression units, by race) miss
+# and replace them.
 FACTOR_CACHE_BYTES = 256 * 2**20
 _factors: OrderedDict[bytes, tuple[SuperLU, int]] = OrderedDict()
 
