@@ -504,6 +504,7 @@ COMMITTED_STATES = {"stage17": "configs/train/realistic_rig_heavier.yaml",
                     "stage18": "configs/train/realistic_rig_heavier.yaml",
                     "ablation_no_neutral": "configs/train/realistic_rig_heavier_no_neutral.yaml",
                     "ablation_no_neutral_19": "configs/train/realistic_rig_authored_no_neutral.yaml",
+                    "ablation_no_neutral_20": "configs/train/realistic_rig_authored_no_neutral.yaml",
                     "stage19": "configs/train/realistic_rig_authored.yaml",
                     "stage20": "configs/train/realistic_rig_authored.yaml"}
 
