@@ -108,6 +108,11 @@ class NFSConfig:
             of where on the face each target vertex lies, finer than the L segments, so that
             M(x) can place each FACS shape on a new identity. 0 = none (every checkpoint saved
             before the field existed). Needs the basis decoder with skinning.
+        blind_encoder: beyond the paper, with ``neutral_channels``: a second expression encoder,
+            the paper's (input [v, c], no neutral channels), that reads the sources whose neutral
+            is unknown; the neutral-aware encoder then reads only sources with their neutral. The
+            two readings share no weight (docs/RESULTS.md, "A separate encoder without the
+            neutral"). False = one encoder for both (every checkpoint saved before the field).
     """
 
     code_dim: int = 128
@@ -132,6 +137,7 @@ class NFSConfig:
     decoder_fourier: int = 0
     neutral_channels: bool = False
     skin_descriptor: int = 0
+    blind_encoder: bool = False
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -153,6 +159,9 @@ class NFSConfig:
                              f"({self.code_dim})")
         if self.skin_descriptor and (self.decoder != "basis" or not self.use_skinning):
             raise ValueError("NFSConfig.skin_descriptor needs decoder 'basis' with use_skinning")
+        if self.blind_encoder and not self.neutral_channels:
+            raise ValueError("NFSConfig.blind_encoder needs neutral_channels (without them the "
+                             "one expression encoder is already the paper's)")
         if self.decoder_layers < 2:
             raise ValueError(f"NFSConfig.decoder_layers must be >= 2, got {self.decoder_layers}")
         if not 0.0 <= self.dropout < 1.0:  # NaN too
@@ -288,6 +297,9 @@ class NFSModel(nn.Module):
         self.expression_encoder = DiffusionNet(
             c_in + NEUTRAL_CHANNEL_DIM * cfg.neutral_channels, cfg.code_dim, cfg.enc_width,
             cfg.enc_blocks, cfg.dropout, outputs="global_mean")
+        if cfg.blind_encoder:
+            self.blind_encoder = DiffusionNet(c_in, cfg.code_dim, cfg.enc_width, cfg.enc_blocks,
+                                              cfg.dropout, outputs="global_mean")
         if cfg.use_skinning:
             self.skinning_encoder = DiffusionNet(c_in, cfg.n_segments + cfg.skin_descriptor,
                                                  cfg.enc_width,
@@ -339,8 +351,12 @@ class NFSModel(nn.Module):
         ``c`` is the image code of the mesh's *neutral* render and ``ops`` may be the neutral's
         operators, as in the paper. ``neutral``: (V, NEUTRAL_CHANNEL_DIM) channels relative to the
         source's neutral (``retarget.prepare.neutral_channels``), or None when it is unknown; used
-        only by a model with ``cfg.neutral_channels`` (ignored otherwise).
+        only by a model with ``cfg.neutral_channels`` (ignored otherwise). A model with
+        ``cfg.blind_encoder`` reads a source without its neutral by its second encoder.
         """
+        if neutral is None and self.cfg.blind_encoder:
+            self._check_features(feat)
+            return self._encode(self.blind_encoder, feat, c, ops)
         return self._encode(self.expression_encoder, self.expression_input(feat, neutral), c, ops)
 
     def expression_input(self, feat: torch.Tensor, neutral: torch.Tensor | None = None) -> torch.Tensor:

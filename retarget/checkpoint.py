@@ -170,7 +170,7 @@ def model_from_checkpoint(state: dict, path="checkpoint") -> NFSModel:
 
 
 #: The DiffusionNet encoders, which ``warm_start`` widens to a larger ``NFSConfig.enc_width``.
-ENCODERS = ("identity_encoder", "expression_encoder", "skinning_encoder")
+ENCODERS = ("identity_encoder", "expression_encoder", "skinning_encoder", "blind_encoder")
 
 
 def widen_encoder_tensor(key: str, src: torch.Tensor, dst: torch.Tensor, old: int, new: int) -> None:
@@ -239,7 +239,10 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
     (``widen_encoder_tensor``). A model with more skinning descriptor channels
     (``NFSConfig.skin_descriptor``) takes the old rows and columns of ``DESCRIPTOR_TENSORS``;
     its decoder reads the new channels through zero columns, so it computes what the old model
-    did. Everything else keeps its fresh
+    did. A model with a blind encoder (``NFSConfig.blind_encoder``) started from one without
+    takes the old expression encoder for it, narrowed as above when the old one reads the
+    neutral channels: it computes what the old model did without the neutral. Everything else
+    keeps its fresh
     initialisation, except a fresh decoder's last layer, which starts at zero: the warm-started
     model first predicts no displacement (doing nothing) rather than a random field whose large
     first gradients would pull the copied encoders around.
@@ -257,6 +260,10 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
     fresh = set(fresh) | ({"decoder"} if model.cfg.decoder != initial.cfg.decoder else set())
     widths = (initial.cfg.enc_width, model.cfg.enc_width)
     report: dict[str, list[str]] = {"copied": [], "widened": [], "narrowed": [], "fresh": []}
+    if model.cfg.blind_encoder and not initial.cfg.blind_encoder:
+        old = {**old, **{"blind_encoder." + k.split(".", 1)[1]: v for k, v in old.items()
+                         if k.startswith("expression_encoder.")}}
+    narrowed_bias = []
     with torch.no_grad():
         for name, tensor in new.items():
             src = old.get(name)
@@ -269,11 +276,12 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                   and src.shape[0] == tensor.shape[0] and src.shape[1] < tensor.shape[1]):
                 _embed(src, tensor, zero=True)
                 report["widened"].append(name)
-            elif (name == "expression_encoder.first.weight" and src.dim() == 2
-                  and src.shape[0] == tensor.shape[0]
+            elif (name in ("expression_encoder.first.weight", "blind_encoder.first.weight")
+                  and src.dim() == 2 and src.shape[0] == tensor.shape[0]
                   and src.shape[1] == tensor.shape[1] + NEUTRAL_CHANNEL_DIM):
                 tensor.copy_(src[:, :tensor.shape[1]])
                 report["narrowed"].append(name)
+                narrowed_bias.append((name.replace(".weight", ".bias"), src[:, -1]))
             elif (name in DESCRIPTOR_TENSORS
                   and widens_descriptor(src, tensor, DESCRIPTOR_TENSORS[name])):
                 _embed(src, tensor, zero=True)
@@ -284,8 +292,8 @@ def warm_start(model: NFSModel, initial: NFSModel, fresh: tuple[str, ...] = ()
                 report["widened"].append(name)
             else:
                 report["fresh"].append(name)
-        if report["narrowed"]:   # flag 1 (no neutral) times its column, now a constant
-            new["expression_encoder.first.bias"] += old["expression_encoder.first.weight"][:, -1]
+        for bias, flag_column in narrowed_bias:   # flag 1 (no neutral) times its column, now a
+            new[bias] += flag_column                 # constant
         if "decoder" in fresh:   # (the state dict's tensors are the model's own: no load needed)
             model.decoder[-1].weight.zero_()
             model.decoder[-1].bias.zero_()

@@ -78,7 +78,10 @@ DEFAULTS = {
               "ckpt_minutes": 5.0,
               # processes preparing the samples of the next steps (retarget.prefetch); 0 = in the
               # training process. The samples are the same either way.
-              "data_workers": 0},
+              "data_workers": 0,
+              # the top-level modules that train (e.g. [blind_encoder]); null = all. The others
+              # keep the weights they start with (--init), and the optimizer holds only these.
+              "trainable": None},
 }
 
 
@@ -175,6 +178,26 @@ def model_cfg(cfg: dict, where: str = "config") -> NFSConfig:
         return NFSConfig.preset(m.pop("preset", "cpu"), **m)
     except (ValueError, TypeError) as e:
         raise RetargetError(f"{where}: model: {e}") from None
+
+
+def trainable_parameters(model: NFSModel, trainable, where: str = "config") -> list:
+    """The parameters that train (``train.trainable``: top-level module names, or None for all);
+    every other parameter is frozen (``requires_grad`` False). RetargetError naming ``where`` for
+    a name that is not one of the model's modules."""
+    if trainable is None:
+        return list(model.parameters())
+    modules = [name for name, _ in model.named_children()]
+    if (not isinstance(trainable, list) or not trainable
+            or not all(isinstance(n, str) and n in modules for n in trainable)):
+        raise RetargetError(f"{where}: train.trainable must be null or a list of the model's "
+                            f"modules ({', '.join(modules)}), got {str(trainable)[:80]!r}")
+    params = []
+    for name, module in model.named_children():
+        for p in module.parameters():
+            p.requires_grad_(name in trainable)
+            if name in trainable:
+                params.append(p)
+    return params
 
 
 # ------------------------------------------------------------------------------------- devices
@@ -432,7 +455,9 @@ class Trainer:
         if self.world > 1:
             for p in self.model.parameters():
                 dist.broadcast(p.data, 0)
-        self.opt = torch.optim.AdamW(self.model.parameters(), lr=cfg["optim"]["lr"],
+        self.opt = torch.optim.AdamW(trainable_parameters(self.model, cfg["train"]["trainable"],
+                                                          config_path or "config"),
+                                     lr=cfg["optim"]["lr"],
                                      weight_decay=cfg["optim"]["weight_decay"])
         workers = cfg["train"]["data_workers"]
         self.pool = (PrefetchPool(cfg["data"], self.model_cfg, seed, workers, self.rank) if workers

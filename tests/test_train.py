@@ -534,3 +534,65 @@ def test_committed_resumable_state_resumes_under_its_config(tmp_path, name):
     # a run stopped by Ctrl-C keeps the steps after its last log row (rows every log_every steps)
     assert 0 <= trainer.step - int(last["step"]) < cfg["train"]["log_every"] and trainer.step > 0
     assert trainer.cfg["loss"]["rig"] > 0
+
+
+def test_a_blind_encoder_reads_sources_without_the_neutral_and_starts_as_the_old_reading():
+    from nets.model import NFSConfig, NFSModel
+    from retarget.checkpoint import warm_start
+    from retarget.prepare import neutral_channels
+
+    with pytest.raises(ValueError, match="blind_encoder needs neutral_channels"):
+        NFSConfig.preset("tiny", blind_encoder=True)
+    torch.manual_seed(0)
+    old = NFSModel(NFSConfig.preset("tiny", decoder="basis", neutral_channels=True))
+    with torch.no_grad():
+        old.expression_encoder.first.weight.normal_()   # as if trained: the flag's column matters
+    torch.manual_seed(1)
+    new = NFSModel(NFSConfig.preset("tiny", decoder="basis", neutral_channels=True,
+                                    blind_encoder=True))
+    report = warm_start(new, old)
+    assert report["narrowed"] == ["blind_encoder.first.weight"] and not report["fresh"]
+    rig, mesh, (feat, img, ops) = small_head(old.cfg)
+    frame = mesh.canon.to_canonical(rig.evaluate(np.full(53, 0.3))).astype(np.float32)
+    channels = torch.from_numpy(neutral_channels(frame, mesh.vertices, mesh.faces))
+    with torch.no_grad():
+        c = old.image_code(img)[0]
+        for ch in (None, channels):   # both readings start as the old model's
+            torch.testing.assert_close(new.encode_expression(feat, c, ops, ch),
+                                       old.encode_expression(feat, c, ops, ch), rtol=1e-5, atol=1e-5)
+        # the blind encoder reads only sources without the neutral; the other encoder only those with it
+        new.blind_encoder.last.bias += 1.0
+        torch.testing.assert_close(new.encode_expression(feat, c, ops),
+                                   old.encode_expression(feat, c, ops) + 1.0, rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(new.encode_expression(feat, c, ops, channels),
+                                   old.encode_expression(feat, c, ops, channels), rtol=1e-5, atol=1e-5)
+        new.expression_encoder.last.bias += 1.0
+        torch.testing.assert_close(new.encode_expression(feat, c, ops),
+                                   old.encode_expression(feat, c, ops) + 1.0, rtol=1e-5, atol=1e-5)
+    # started again from a model that has one, it is copied as it is
+    again = NFSModel(new.cfg)
+    assert not warm_start(again, new)["narrowed"]
+    assert torch.equal(again.blind_encoder.last.bias, new.blind_encoder.last.bias)
+
+
+def test_trainable_modules_train_and_every_other_weight_stays(tmp_path):
+    cfg = tiny_cfg(steps=3)
+    cfg["model"] = {"preset": "tiny", "decoder": "basis", "neutral_channels": True,
+                    "blind_encoder": True}
+    cfg["data"]["source_neutral_share"] = 0.0
+    cfg["train"]["trainable"] = ["blind_encoder"]
+    t = Trainer(cfg, tmp_path / "run", progress=False)
+    before = {k: v.clone() for k, v in t.model.state_dict().items()}
+    t.run()
+    after = t.model.state_dict()
+    moved = {k.split(".")[0] for k in before if not torch.equal(before[k], after[k])}
+    assert moved == {"blind_encoder"}
+    # resumes with the same frozen set and optimizer
+    cfg["train"]["steps"] = 4
+    resumed = Trainer(cfg, tmp_path / "run", progress=False)
+    assert resumed.resume() and resumed.step == 3
+    resumed.run()
+    for bad in (["dekoder"], "blind_encoder", []):
+        cfg["train"]["trainable"] = bad
+        with pytest.raises(RetargetError, match="train.trainable must be null or a list"):
+            Trainer(cfg, tmp_path / "bad", progress=False)
