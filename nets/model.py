@@ -345,16 +345,17 @@ class NFSModel(nn.Module):
         return self._encode(self.identity_encoder, feat, c, ops)
 
     def encode_expression(self, feat: torch.Tensor, c: torch.Tensor, ops,
-                          neutral: torch.Tensor | None = None) -> torch.Tensor:
+                          neutral: torch.Tensor | None = None, blind: bool = True) -> torch.Tensor:
         """Expression encoder on an expression mesh -> z_GE (code_dim,); z_GE[:53] = FACS weights.
 
         ``c`` is the image code of the mesh's *neutral* render and ``ops`` may be the neutral's
         operators, as in the paper. ``neutral``: (V, NEUTRAL_CHANNEL_DIM) channels relative to the
         source's neutral (``retarget.prepare.neutral_channels``), or None when it is unknown; used
         only by a model with ``cfg.neutral_channels`` (ignored otherwise). A model with
-        ``cfg.blind_encoder`` reads a source without its neutral by its second encoder.
+        ``cfg.blind_encoder`` reads a source without its neutral by its second encoder, unless
+        ``blind`` is False (then by the neutral-aware one, its flag set, as a model without it).
         """
-        if neutral is None and self.cfg.blind_encoder:
+        if neutral is None and self.cfg.blind_encoder and blind:
             self._check_features(feat)
             return self._encode(self.blind_encoder, feat, c, ops)
         return self._encode(self.expression_encoder, self.expression_input(feat, neutral), c, ops)

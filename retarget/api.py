@@ -669,7 +669,8 @@ class Retargeter:
         self._sources.clear()
 
     @torch.no_grad()
-    def encode(self, frames, source_neutral=None, progress: bool = False) -> np.ndarray:
+    def encode(self, frames, source_neutral=None, progress: bool = False,
+               blind: bool = True) -> np.ndarray:
         """Global expression codes z_GE of source frame(s): a mesh (a Mesh, a ``trimesh.Trimesh`` or
         a ``(vertices, faces)`` pair) or a list of frames sharing a topology -> (128,) or (T,128).
 
@@ -683,7 +684,10 @@ class Retargeter:
         topology this Retargeter saw, and kept for later calls (:meth:`source_topology`; bounded by
         ``source_cache_size``, emptied by :meth:`clear_source_cache`). So a stream of single-frame
         calls costs what one batched call does per frame. To switch to another performer of the same
-        topology, pass their ``source_neutral`` or clear the cache. ``progress``: a tqdm bar."""
+        topology, pass their ``source_neutral`` or clear the cache. ``progress``: a tqdm bar.
+        ``blind``: without ``source_neutral``, a model with a blind encoder
+        (``NFSConfig.blind_encoder``) reads the frames by it (True) or by its neutral-aware
+        encoder, its no-neutral flag set (False)."""
         from tqdm import tqdm
 
         frames, single = source_frames(frames)
@@ -711,7 +715,7 @@ class Retargeter:
                                                           p.normals, src.neutral[1]))
                         .to(self.device) if use_neutral else None)
             codes.append(self.model.encode_expression(feat, self.model.image_code(img)[0], src.ops_t,
-                                                      channels))
+                                                      channels, blind=blind))
         out = torch.stack(codes).cpu().numpy()
         return out[0] if single else out
 
@@ -940,7 +944,10 @@ class Retargeter:
         reading is off by the no-neutral error, but the errors of different expressions largely
         cancel in the median, so the estimate can then serve as ``source_neutral``, with
         ``refine`` (docs/RESULTS.md, "A neutral estimated from the take"). A take of one frame gives
-        that frame's own reading back; the more varied the take, the better the estimate.
+        that frame's own reading back; the more varied the take, the better the estimate. A model
+        with a blind encoder (``NFSConfig.blind_encoder``) reads the frames here by its
+        neutral-aware encoder (``encode(..., blind=False)``): its estimates were the better ones
+        (docs/RESULTS.md, "Stage 21").
 
         frames: a Mesh or a list of frames sharing a topology (at most ``max_frames``, default
         ``ESTIMATE_FRAMES``, evenly spaced, are used; their head motion against the first of them
@@ -951,7 +958,7 @@ class Retargeter:
         picked = [frames[i] for i in np.unique(np.linspace(0, len(frames) - 1, n).round().astype(int))]
         if self.stabilise and len(picked) > 1:        # in the first frame's place
             picked = self.stabilise_frames(picked, picked[0])[0]
-        z = self.encode(picked)                                  # (T', 128): a list always
+        z = self.encode(picked, blind=False)                     # (T', 128): a list always
         first = picked[0]
         identity = self.prepare(first)
         readings = np.empty((len(picked),) + first.vertices.shape, np.float32)

@@ -609,3 +609,25 @@ def test_eval_refuses_negative_refine_steps(files, tmp_path, capsys):
                  "--suite", "inverse", "--neutral-modes", "refine", "--refine-steps", "-2",
                  "--no-oracle", "--no-progress", "--device", "cpu"]) == 2
     assert capsys.readouterr().err.strip() == "error: --refine-steps must be >= 0, got -2"
+
+
+def test_a_blind_encoder_reads_frames_without_the_neutral_but_not_the_estimate(rig, weights):
+    """A model with a blind encoder reads a take without its neutral by it, with it by the
+    neutral-aware encoder; estimate_neutral reads by the neutral-aware one (no-neutral flag)."""
+    torch.manual_seed(0)
+    model = NFSModel(NFSConfig.preset("tiny", neutral_channels=True, blind_encoder=True))
+    r = Retargeter(model, device="cpu", stabilise=False)
+    frames = [Mesh(f, rig.faces) for f in rig.evaluate(weights)]
+    neutral = Mesh(rig.neutral, rig.faces)
+    blind, shared = r.encode(frames), r.encode(frames, blind=False)
+    with_neutral = r.encode(frames, source_neutral=neutral)
+    estimate = r.estimate_neutral(frames).vertices
+    with torch.no_grad():
+        model.blind_encoder.last.bias += 0.5
+    np.testing.assert_allclose(r.encode(frames), blind + 0.5, atol=1e-5)
+    np.testing.assert_array_equal(r.encode(frames, blind=False), shared)
+    np.testing.assert_array_equal(r.encode(frames, source_neutral=neutral), with_neutral)
+    np.testing.assert_array_equal(r.estimate_neutral(frames).vertices, estimate)
+    with torch.no_grad():
+        model.expression_encoder.last.bias += 0.5
+    assert np.abs(r.estimate_neutral(frames).vertices - estimate).max() > 1e-6
