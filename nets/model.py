@@ -111,8 +111,8 @@ class NFSConfig:
         blind_encoder: beyond the paper, with ``neutral_channels``: a second expression encoder,
             the paper's (input [v, c], no neutral channels), that reads the sources whose neutral
             is unknown; the neutral-aware encoder then reads only sources with their neutral. The
-            two readings share no weight (docs/RESULTS.md, "A separate encoder without the
-            neutral"). False = one encoder for both (every checkpoint saved before the field).
+            two readings share no weight (docs/RESULTS.md, "Stage 21"). False = one encoder for
+            both (every checkpoint saved before the field).
     """
 
     code_dim: int = 128

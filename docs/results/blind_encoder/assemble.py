@@ -1,5 +1,5 @@
-"""The starting point of the blind-encoder study's second arm (issue 10, docs/RESULTS.md, "A separate
-encoder without the neutral"): the bundled stage 19 with a blind encoder
+"""The starting point of the bundled stage 21's run (issue 10, docs/RESULTS.md, "Stage 21": blind_b,
+and the study's blind_b_lr and blind_joint): stage 19 with a blind encoder
 (``NFSConfig.blind_encoder``) that is the ``no_neutral`` ablation's expression encoder at the same
 budget (training/ablation_no_neutral_19), instead of stage 19's own encoder read without the
 neutral (what ``retarget train --init-partial`` gives). An inference checkpoint, for
