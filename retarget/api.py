@@ -232,6 +232,16 @@ def _ridge(gram: np.ndarray, prior: float) -> float:
     return prior * float(np.trace(gram)) / len(gram) + 1e-12
 
 
+def pull_scales(gram: np.ndarray, balance: float) -> np.ndarray:
+    """The size each weight's pulls in ``SourceRig.fit`` are measured in, for the Gram matrix AᵀA
+    (K,K) float64 of a rig: s_k = m^(1 − β) d_k^β, d_k = |shape k|² (diag AᵀA), m their mean,
+    β = ``balance`` -> (K,) float64. β = 0: every weight pulled alike (m); β = 1: each in
+    proportion to its own shape's size; between them, the geometric mean of the two."""
+    d = np.diag(gram).astype(np.float64)
+    m = float(d.mean())
+    return m ** (1.0 - balance) * np.power(np.maximum(d, 1e-30), balance)
+
+
 def _ridge_factor(gram: np.ndarray, prior: float) -> tuple[np.ndarray, float]:
     """For the Gram matrix AᵀA (K,K) float64 of a linear model: (upper-triangular R (K,K) with
     RᵀR = AᵀA + λI, λ), λ = ``_ridge(gram, prior)``."""
@@ -299,7 +309,7 @@ class SourceRig:
 
     target: the source neutral prepared as a target; baked: its 53 decoded one-hot shapes (source
     units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; gram: AᵀA (53,53) float64, whose
-    ridge factors (one per prior, the pull towards the encoder's estimate) are made when first
+    ridge factors (one per prior, the pull towards the encoder's estimate, and balance) are made when first
     used (factors); rest (made on first use): the indices of the face's vertices the baked shapes
     move least (``retarget.stabilise.rest_vertices``, in the mesh's indexing), on which a frame's
     head motion is fitted (``Retargeter.stabilise_frames``). With the basis decoder also free_basis:
@@ -377,10 +387,14 @@ class SourceRig:
         return w, f.astype(np.float32)
 
     def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float, sparsity: float = 0.0,
-            reweight: tuple = ()) -> np.ndarray:
-        """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + λ|w − w0|² + μ Σw, λ =
-        prior · mean diag(AᵀA), μ = sparsity · mean diag(AᵀA) (an L1 pull towards 0, which on
-        w ≥ 0 is linear): frame (V,3) in the source's units, w0 (53,) the encoder's estimate. Bounded
+            reweight: tuple = (), balance: float = 0.0) -> np.ndarray:
+        """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + Σ_k λ_k (w_k − w0_k)² +
+        Σ_k μ_k w_k, λ_k = prior · s_k, μ_k = sparsity · s_k (an L1 pull towards 0, which on
+        w ≥ 0 is linear), s_k = ``pull_scales(AᵀA, balance)``: with ``balance`` 0 the mean
+        diag(AᵀA) for every weight, with 0.5 the geometric mean of that and shape k's own |B̂_k|²,
+        so that a small shape (a brow, an eye look) is pulled less than a large one (docs/RESULTS.md,
+        "Invert's pulls in proportion to each shape"): frame (V,3) in the source's units, w0 (53,)
+        the encoder's estimate. Bounded
         least squares (``scipy.optimize.lsq_linear``, BVLS) on the 53×53 reduced system
         R w ≈ R⁻ᵀ (Aᵀb + λ w0), which has the same minimiser as the full (3V+53)-row problem; the
         problem is convex, so the estimate enters as the prior, not as a starting point. When the
@@ -389,26 +403,31 @@ class SourceRig:
         reweight: (μ_max, ε, passes) for reweighted L1 (Candès, Wakin and Boyd 2008): after the
         fit above, ``passes`` more fits with a pull of μ_max · ε / (w_k + ε) on each weight, w the
         previous pass's: weights the frame needs are barely pulled, the small ones a fit spreads
-        over many shapes are pulled hard towards 0. () = off."""
-        if prior not in self.factors:
-            self.factors[prior] = _ridge_factor(self.gram, prior)
-        chol, ridge = self.factors[prior]
+        over many shapes are pulled hard towards 0 (μ_k = that pull · s_k). () = off."""
+        key = (prior, balance)
+        if key not in self.factors:
+            scales = pull_scales(self.gram, balance)
+            ridge = prior * scales + 1e-12
+            self.factors[key] = (np.linalg.cholesky(self.gram + np.diag(ridge)).T, ridge, scales)
+        chol, ridge, scales = self.factors[key]
         b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
         h = (self.basis @ b).astype(np.float64) + ridge * w0
-        w = self._bounded_solve(chol, h, sparsity)
+        w = self._bounded_solve(chol, h, sparsity, scales)
         if reweight:
             mu_max, eps, passes = reweight
             for _ in range(int(passes)):
-                w = self._bounded_solve(chol, h, mu_max * eps / (w.astype(np.float64) + eps))
+                w = self._bounded_solve(chol, h, mu_max * eps / (w.astype(np.float64) + eps), scales)
         return w
 
-    def _bounded_solve(self, chol: np.ndarray, h: np.ndarray, sparsity) -> np.ndarray:
+    def _bounded_solve(self, chol: np.ndarray, h: np.ndarray, sparsity,
+                       scales: np.ndarray | None = None) -> np.ndarray:
         """argmin over w in [0,1]^53 of wᵀRᵀRw − 2hᵀw + Σ μ_k w_k (R = chol (53,53) upper-triangular,
-        h (53,) float64, μ = sparsity · mean diag(AᵀA), sparsity a float or one per weight (53,)):
-        the unconstrained minimiser when it lies in the box, else BVLS on R w ≈ R⁻ᵀ h -> (53,)
-        float32."""
+        h (53,) float64, μ_k = sparsity_k · s_k, sparsity a float or one per weight (53,), s the
+        ``pull_scales`` (53,), by default mean diag(AᵀA) for every weight): the unconstrained
+        minimiser when it lies in the box, else BVLS on R w ≈ R⁻ᵀ h -> (53,) float32."""
         if np.any(np.asarray(sparsity) > 0.0):
-            h = h - 0.5 * np.asarray(sparsity, np.float64) * float(np.trace(self.gram)) / len(self.gram)
+            s = float(np.trace(self.gram)) / len(self.gram) if scales is None else scales
+            h = h - 0.5 * np.asarray(sparsity, np.float64) * s
         return box_least_squares(chol, h).astype(np.float32)
 
 
@@ -445,14 +464,20 @@ class Retargeter:
     #: "Inverse rigging's weights" and, for invert's fit, "The code map").
     REFINE_PRIOR = 1e-3
     REFINE_SPARSITY = 0.0
+    REFINE_BALANCE = 0.0
     REFINE_PRIOR_INVERT = 0.01
     REFINE_SPARSITY_INVERT = 0.002
     REFINE_REWEIGHT_INVERT = (0.02, 0.05, 2)
-    #: invert's fit (prior, sparsity, reweight) with a code map (the three above) and without one
-    #: (the fit tuned before the map, better there on realistic heads): the code_map setter puts
-    #: the one that fits in the three attributes of the instance
-    REFINE_INVERT_FITS = {True: (REFINE_PRIOR_INVERT, REFINE_SPARSITY_INVERT, REFINE_REWEIGHT_INVERT),
-                          False: (0.1, 0.02, (0.1, 0.05, 2))}
+    #: how invert's pulls are shared between large and small shapes (``SourceRig.fit``'s
+    #: ``balance``: 0.5 pulls each weight in proportion to the geometric mean of its shape's size
+    #: and the mean size; transfer's fit keeps ``REFINE_BALANCE`` 0, every weight alike)
+    REFINE_BALANCE_INVERT = 0.5
+    #: invert's fit (prior, sparsity, reweight, balance) with a code map (the four above) and
+    #: without one (the fit tuned before the map, better there on realistic heads): the code_map
+    #: setter puts the one that fits in the four attributes of the instance
+    REFINE_INVERT_FITS = {True: (REFINE_PRIOR_INVERT, REFINE_SPARSITY_INVERT, REFINE_REWEIGHT_INVERT,
+                                 REFINE_BALANCE_INVERT),
+                          False: (0.1, 0.02, (0.1, 0.05, 2), 0.0)}
     REFINE_FREE_PRIOR = 1e-3
     REFINE_JOINT = True
     REFINE_JOINT_INVERT = False
@@ -502,8 +527,8 @@ class Retargeter:
             self._code_map = check_code_map(value, self.cfg)
         except ValueError as e:
             raise RetargetError(str(e)) from None
-        (self.REFINE_PRIOR_INVERT, self.REFINE_SPARSITY_INVERT,
-         self.REFINE_REWEIGHT_INVERT) = self.REFINE_INVERT_FITS[self._code_map is not None]
+        (self.REFINE_PRIOR_INVERT, self.REFINE_SPARSITY_INVERT, self.REFINE_REWEIGHT_INVERT,
+         self.REFINE_BALANCE_INVERT) = self.REFINE_INVERT_FITS[self._code_map is not None]
         self._source_rigs.clear()
 
     @property
@@ -749,7 +774,8 @@ class Retargeter:
         ``smooth``: None, "one_euro" (streaming) or "savgol" (offline) filtering over frames.
         ``refine``: analysis-by-synthesis on the source's own baked rig (needs ``source_neutral``;
         see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT`` and
-        towards 0 with ``REFINE_SPARSITY_INVERT``, reweighted by ``REFINE_REWEIGHT_INVERT``. A
+        towards 0 with ``REFINE_SPARSITY_INVERT``, reweighted by ``REFINE_REWEIGHT_INVERT``, each
+        pull shared between the shapes by ``REFINE_BALANCE_INVERT``. A
         source with eyeballs (``source_eyes``) gives its eight look weights from their turn
         (``source_gaze``, ``retarget.eyes.weights_from_gaze``)."""
         z = self.encode(frames, source_neutral, progress)
@@ -757,7 +783,8 @@ class Retargeter:
         if refine:
             w = self.refine_fit(frames, source_neutral, z, self.REFINE_PRIOR_INVERT,
                                 self.REFINE_SPARSITY_INVERT, self.REFINE_JOINT_INVERT,
-                                self.REFINE_REWEIGHT_INVERT)[0].reshape(w.shape)
+                                self.REFINE_REWEIGHT_INVERT,
+                                self.REFINE_BALANCE_INVERT)[0].reshape(w.shape)
         eyes = self.source_eyes(frames, source_neutral)
         if eyes is not None:                                        # the looks its eyeballs show
             gaze = self._measured_gaze(eyes, frames, source_neutral)
@@ -837,16 +864,19 @@ class Retargeter:
 
     def refine(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
                prior: float | None = None, sparsity: float | None = None,
-               joint: bool | None = None, reweight: tuple = ()) -> np.ndarray:
+               joint: bool | None = None, reweight: tuple = (),
+               balance: float | None = None) -> np.ndarray:
         """Analysis-by-synthesis (``refine_fit``), as the codes z_GE the decoder draws the fit with
         (``rig_codes``): (128,) or (T,128) like ``z_ge``, float32."""
-        return self._refined(frames, source_neutral, z_ge, prior, sparsity, joint, reweight)[0]
+        return self._refined(frames, source_neutral, z_ge, prior, sparsity, joint, reweight,
+                             balance)[0]
 
     def _refined(self, frames, source_neutral: Mesh, z_ge: np.ndarray, prior=None, sparsity=None,
-                 joint=None, reweight=()) -> tuple[np.ndarray, np.ndarray]:
+                 joint=None, reweight=(), balance=None) -> tuple[np.ndarray, np.ndarray]:
         """``refine``'s codes, shaped like ``z_ge``, and the fitted weights they stand for, (53,) or
         (T,53)."""
-        w, f = self.refine_fit(frames, source_neutral, z_ge, prior, sparsity, joint, reweight)
+        w, f = self.refine_fit(frames, source_neutral, z_ge, prior, sparsity, joint, reweight,
+                               balance)
         codes = self.rig_codes(w, f, self.source_rig(source_neutral).target).reshape(np.shape(z_ge))
         return codes, w.reshape(np.shape(z_ge)[:-1] + (N_FACS,))
 
@@ -862,7 +892,8 @@ class Retargeter:
 
     def refine_fit(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
                    prior: float | None = None, sparsity: float | None = None,
-                   joint: bool | None = None, reweight: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
+                   joint: bool | None = None, reweight: tuple = (),
+                   balance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
@@ -876,7 +907,9 @@ class Retargeter:
         towards the encoder (default ``REFINE_PRIOR``); sparsity: their L1 pull towards 0
         (``SourceRig.fit``; default ``REFINE_SPARSITY``). joint: weights and free dims fitted
         together (``SourceRig.fit_joint``, basis decoder; default ``REFINE_JOINT``). reweight:
-        reweighted L1 of the weights-alone fit (``SourceRig.fit``; () = off). The frames' head
+        reweighted L1 of the weights-alone fit (``SourceRig.fit``; () = off); balance: how that
+        fit shares its pulls between large and small shapes (``SourceRig.fit``; default
+        ``REFINE_BALANCE``; the joint fit pulls every weight alike). The frames' head
         motion is removed first (``stabilise_frames``, unless ``stabilise`` is off)."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
@@ -888,6 +921,7 @@ class Retargeter:
         rig = self.source_rig(source_neutral)
         prior = self.REFINE_PRIOR if prior is None else prior
         sparsity = self.REFINE_SPARSITY if sparsity is None else sparsity
+        balance = self.REFINE_BALANCE if balance is None else balance
         joint = (self.REFINE_JOINT if joint is None else joint) and rig.free_basis is not None
         out = np.zeros_like(z)
         for i, frame in enumerate(frames):
@@ -897,7 +931,7 @@ class Retargeter:
                     out[i, :N_FACS], out[i, N_FACS:] = rig.fit_joint(frame.vertices, w0, prior,
                                                                      sparsity)
                     continue
-                out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity, reweight)
+                out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity, reweight, balance)
                 if rig.free_basis is not None:
                     out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             if rig.free_basis is None and self.refine_steps > 0:
@@ -1036,26 +1070,28 @@ class Retargeter:
                          refine_prior: float | None = None,
                          refine_sparsity: float | None = None,
                          refine_joint: bool | None = None,
-                         refine_reweight: tuple = ()) -> np.ndarray:
+                         refine_reweight: tuple = (),
+                         refine_balance: float | None = None) -> np.ndarray:
         """What ``transfer`` decodes: z_GE of the source frame(s), (128,) or (T,128), refined by
         analysis-by-synthesis when ``refine`` (``refine``, with ``refine_prior``,
-        ``refine_sparsity``, ``refine_joint`` and ``refine_reweight``), temporally filtered when
-        ``smooth`` is given (see ``invert``)."""
+        ``refine_sparsity``, ``refine_joint``, ``refine_reweight`` and ``refine_balance``),
+        temporally filtered when ``smooth`` is given (see ``invert``)."""
         z = self._codes_weights(source, source_neutral, progress, refine, refine_prior,
-                                refine_sparsity, refine_joint, refine_reweight)[0]
+                                refine_sparsity, refine_joint, refine_reweight, refine_balance)[0]
         if smooth and z.ndim == 2:
             z = smooth_codes(z, smooth, fps)
         return z
 
     def _codes_weights(self, source, source_neutral, progress: bool, refine: bool, prior=None,
-                       sparsity=None, joint=None, reweight=()) -> tuple[np.ndarray, np.ndarray]:
+                       sparsity=None, joint=None, reweight=(),
+                       balance=None) -> tuple[np.ndarray, np.ndarray]:
         """``expression_codes`` before smoothing, and the FACS weights the codes stand for: with
         ``refine`` the fitted ones, else the encoder's clipped to [0,1] -> ((128,) or (T,128),
         (53,) or (T,53))."""
         z = self.encode(source, source_neutral, progress)
         if not refine:
             return z, np.clip(z[..., :N_FACS], 0.0, 1.0)
-        return self._refined(source, source_neutral, z, prior, sparsity, joint, reweight)
+        return self._refined(source, source_neutral, z, prior, sparsity, joint, reweight, balance)
 
     def expression(self, source, source_neutral: Mesh | None = None, smooth: str | None = None,
                    fps: float = 30.0, progress: bool = False,

@@ -220,6 +220,50 @@ def test_sparse_fit_is_the_minimiser_of_the_l1_objective(rig):
         assert fit.sum() < plain.sum()
 
 
+def test_balanced_fit_is_the_minimiser_with_pulls_per_shape(rig):
+    """SourceRig.fit with balance β: the weights satisfy the optimality conditions of
+    |A w − b|² + Σ λ s_k (w_k − w0_k)² + Σ μ s_k w_k on [0, 1] with s_k = m^(1−β) |B_k|^(2β), and
+    β = 0 is the fit that pulls every weight alike."""
+    rng = np.random.default_rng(5)
+    w = rng.random(53).astype(np.float32) * 0.6
+    src = SourceRig.make(None, BakedRig(rig.neutral, rig.deltas))
+    frame = rig.evaluate(w) + 0.002 * rng.standard_normal(rig.neutral.shape)
+    w0 = np.full(53, 0.2, np.float32)
+    np.testing.assert_array_equal(src.fit(frame, w0, 0.1, 0.02), src.fit(frame, w0, 0.1, 0.02,
+                                                                          balance=0.0))
+    d = np.diag(src.gram)
+    for beta in (0.5, 1.0):
+        fit = src.fit(frame, w0, prior=0.1, sparsity=0.02, balance=beta).astype(np.float64)
+        s = d.mean() ** (1 - beta) * d ** beta
+        b = (frame - rig.neutral).reshape(-1).astype(np.float64)
+        grad = 2 * (src.gram @ fit - src.basis.astype(np.float64) @ b) + 2 * 0.1 * s * (fit - w0) + 0.02 * s
+        tol = 1e-3 * d.mean()
+        inside = (fit > 1e-6) & (fit < 1 - 1e-6)
+        assert np.abs(grad[inside]).max() < tol
+        assert grad[fit <= 1e-6].min(initial=0.0) > -tol and grad[fit >= 1 - 1e-6].max(initial=0.0) < tol
+
+
+def test_balanced_fit_pulls_small_shapes_less():
+    """A rig of 53 shapes that each move their own vertex, of sizes 0.05 to 1, every weight 0.8 in
+    the frame, the encoder's estimate 0: each fitted weight is the closed form
+    0.8 d_k / (d_k + λ s_k), and with balance 0.5 the small shapes come back nearer 0.8 than with
+    the pull of the mean shape's size on each (balance 0)."""
+    sizes = np.linspace(0.05, 1.0, 53)
+    deltas = np.zeros((53, 60, 3), np.float32)
+    deltas[np.arange(53), np.arange(53), 0] = sizes
+    neutral = np.random.default_rng(6).random((60, 3)).astype(np.float32)
+    src = SourceRig.make(None, BakedRig(neutral, deltas))
+    frame = neutral + 0.8 * deltas.sum(0)
+    d = sizes ** 2
+    errors = {}
+    for beta in (0.0, 0.5):
+        fit = src.fit(frame, np.zeros(53, np.float32), prior=0.1, balance=beta)
+        s = d.mean() ** (1 - beta) * d ** beta
+        np.testing.assert_allclose(fit, 0.8 * d / (d + 0.1 * s), atol=1e-5)
+        errors[beta] = np.abs(fit[:10] - 0.8).mean()
+    assert errors[0.5] < 0.5 * errors[0.0]
+
+
 def test_reweighted_fit_leaves_the_unused_shapes_at_0(rig):
     """SourceRig.fit with reweight: a frame of a few shapes, with the prior pulling every weight
     towards 0.2, is explained by weights nearer the true ones than the plain L1 fit's, with less
@@ -259,7 +303,8 @@ def test_refine_fits_the_decoders_own_baked_rig(r, rig, weights):
     inverted = r.invert(frames, source_neutral=neutral, refine=True)
     np.testing.assert_array_equal(inverted, r.expression_codes(
         frames, source_neutral=neutral, refine=True, refine_prior=r.REFINE_PRIOR_INVERT,
-        refine_sparsity=r.REFINE_SPARSITY_INVERT, refine_reweight=r.REFINE_REWEIGHT_INVERT)[:, :53])
+        refine_sparsity=r.REFINE_SPARSITY_INVERT, refine_reweight=r.REFINE_REWEIGHT_INVERT,
+        refine_balance=r.REFINE_BALANCE_INVERT)[:, :53])
     encoder = np.clip(r.invert(frames, source_neutral=neutral), 0, 1)
     assert np.abs(inverted - encoder).mean() < np.abs(w - encoder).mean()
     with pytest.raises(Exception, match="refine needs the source's neutral"):

@@ -5,7 +5,9 @@ For every suite where both methods have each case's MSE (``case_mse_mm2``; the A
 frame's, ``frame_mse_mm2`` / ``frame_rig_mse_mm2``), the ratio B ÷ A of each case, their
 geometric mean and its standard error (of the mean log ratio, shown as a factor), and the pooled
 ratio of the suite's MSE for reference. A suite is marked when the geometric mean is more than two
-standard errors from 1. Markdown on stdout.
+standard errors from 1. Cases where either method's error is exactly 0 (e.g. the ARKit rig's
+inversion of a frame fitted exactly) have no ratio and are left out of the geometric mean; the
+cases column then says how many were kept. Markdown on stdout.
 
     python docs/results/no_neutral_ablation/paired.py EVAL_JSON "A (no neutral)" "B (no neutral)"
 """
@@ -47,13 +49,15 @@ def main(path: str, a: str, b: str) -> None:
     for name, ea, eb in rows:
         if len(ea) != len(eb):
             sys.exit(f"{path}: {name}: {len(ea)} cases of {a!r} against {len(eb)} of {b!r}")
-        log = np.log(eb / ea)
+        kept = (ea > 0) & (eb > 0)
+        log = np.log(eb[kept] / ea[kept])
         se = standard_error(log)
         se = float("nan") if se is None else se
         cell = f"{np.exp(log.mean()):.3f} × / ÷ {np.exp(se):.3f}"
         if abs(log.mean()) > 2 * se:
             cell = f"**{cell}**"
-        print(f"| {name} | {len(log)} | {eb.mean() / ea.mean():.3f} | {cell} | "
+        cases = f"{len(log)}" if kept.all() else f"{len(log)} of {len(ea)} (the rest 0)"
+        print(f"| {name} | {cases} | {eb.mean() / ea.mean():.3f} | {cell} | "
               f"{int((log > 0).sum())} of {len(log)} |")
 
 

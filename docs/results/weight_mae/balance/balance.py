@@ -1,0 +1,77 @@
+"""Invert's pulls in proportion to each shape (docs/RESULTS.md, "Invert's pulls in proportion to
+each shape"): ``SourceRig.fit`` with its ``balance`` β, offline on the inversion cases of
+docs/results/weight_mae/rig_span/cases.py.
+
+The fit pulls weight k towards the encoder's estimate with λ s_k and towards 0 with μ s_k, s_k =
+m^(1−β) |B̂_k|^(2β) (``retarget.api.pull_scales``). β = 0 was the bundled fit: every weight pulled
+with the mean shape's size m, so a small shape (a brow, an eye look, the nose) is held at the
+encoder's estimate by a pull many times what it adds to the frame. Prints one markdown row per
+setting: the weight MAE per suite over all rows (the uniform rows in brackets), the bundled
+sparsity and reweighting throughout.
+
+    python docs/results/weight_mae/balance/balance.py runs/fitstudy/tuning10{0,1,2,3,4}.npz --grid
+    python docs/results/weight_mae/balance/balance.py runs/fitstudy/val_large.npz
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
+from cases import SUITES, load, row_kinds, weight_mae  # noqa: E402
+
+from retarget.api import Retargeter, SourceRig  # noqa: E402
+
+SPARSITY, REWEIGHT = Retargeter.REFINE_SPARSITY_INVERT, Retargeter.REFINE_REWEIGHT_INVERT
+
+
+def fitted(case: dict, prior: float, balance: float) -> np.ndarray:
+    """Invert's fit of every frame of ``case`` on its baked rig -> weights (T, 53)."""
+    a = np.ascontiguousarray(case["A"], np.float32)
+    rig = SourceRig(None, SimpleNamespace(neutral=np.asarray(case["neutral"], np.float32)), a,
+                    a.astype(np.float64) @ a.T.astype(np.float64))
+    return np.array([rig.fit(frame, np.clip(w0, 0.0, 1.0), prior, SPARSITY, REWEIGHT, balance)
+                     for frame, w0 in zip(case["frames"], case["w0"])])
+
+
+def row(cases, name: str, prior: float | None = None, balance: float = 0.0) -> str:
+    """A markdown row: per suite the MAE over all rows (uniform rows) of the fit, or of predicting
+    0 when ``prior`` is None."""
+    cells = []
+    for suite in SUITES:
+        errs, kinds = [], []
+        for c in cases:
+            if str(c["suite"]) != suite:
+                continue
+            w = np.zeros_like(c["w0"]) if prior is None else fitted(c, prior, balance)
+            errs.append(weight_mae(c, w))
+            kinds.append(row_kinds(c))
+        if not errs:
+            cells.append("—")
+            continue
+        e, k = np.concatenate(errs), np.concatenate(kinds)
+        cells.append(f"{e.mean():.4f} ({e[k == 'uniform'].mean():.3f})")
+    return f"| {name} | " + " | ".join(cells) + " |"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("cases", nargs="+")
+    ap.add_argument("--grid", action="store_true", help="priors 0.003, 0.01, 0.03 for each balance")
+    args = ap.parse_args()
+    cases = load(*args.cases)
+    priors = (0.003, 0.01, 0.03) if args.grid else (Retargeter.REFINE_PRIOR_INVERT,)
+    print("| fit | " + " | ".join(SUITES) + " |")
+    print("| --- | " + " | ".join("---:" for _ in SUITES) + " |")
+    print(row(cases, "predicting 0"), flush=True)
+    for balance in (0.0, 0.25, 0.5, 0.75, 1.0):
+        for prior in priors:
+            print(row(cases, f"balance {balance:g}, prior {prior:g}", prior, balance), flush=True)
+
+
+if __name__ == "__main__":
+    main()
