@@ -11,6 +11,11 @@ sparsity and reweighting throughout.
 
     python docs/results/weight_mae/balance/balance.py runs/fitstudy/tuning10{0,1,2,3,4}.npz --grid
     python docs/results/weight_mae/balance/balance.py runs/fitstudy/val_large.npz
+    python docs/results/weight_mae/balance/balance.py runs/fitstudy/val_large.npz --shapes
+
+``--shapes``: instead, per ICT-rigged suite, the mean absolute error of each shape's weight with
+β = 0.5 against β = 0 (prior 0.01): the shapes that gain and lose most, and the eye looks'
+mean against the others'.
 """
 from __future__ import annotations
 
@@ -58,12 +63,39 @@ def row(cases, name: str, prior: float | None = None, balance: float = 0.0) -> s
     return f"| {name} | " + " | ".join(cells) + " |"
 
 
+def shape_changes(cases, suite: str, balance: float = 0.5, shown: int = 8) -> str:
+    """Markdown lines for ``--shapes``: per-shape MAE of the weights, β = 0 -> ``balance``."""
+    from data_synth.facs import FACS_NAMES
+
+    prior = Retargeter.REFINE_PRIOR_INVERT
+    before, after = [], []
+    for c in cases:
+        if str(c["suite"]) == suite:
+            before.append(np.abs(fitted(c, prior, 0.0) - c["gt"]))
+            after.append(np.abs(fitted(c, prior, balance) - c["gt"]))
+    e0, e1 = np.concatenate(before).mean(0), np.concatenate(after).mean(0)
+    order = np.argsort(e1 - e0)
+    looks = np.array([n.startswith("eyeLook") for n in FACS_NAMES])
+
+    def listed(ks):
+        return ", ".join(f"{FACS_NAMES[k]} {e0[k]:.3f} → {e1[k]:.3f}" for k in ks)
+
+    return (f"- {suite}, most worse: {listed(order[::-1][:shown])}\n"
+            f"- {suite}, most better: {listed(order[:shown])}\n"
+            f"- {suite}, the eye looks {e0[looks].mean():.4f} → {e1[looks].mean():.4f}, the other "
+            f"shapes {e0[~looks].mean():.4f} → {e1[~looks].mean():.4f}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("cases", nargs="+")
     ap.add_argument("--grid", action="store_true", help="priors 0.003, 0.01, 0.03 for each balance")
+    ap.add_argument("--shapes", action="store_true", help="per-shape changes, β 0 -> 0.5")
     args = ap.parse_args()
     cases = load(*args.cases)
+    if args.shapes:
+        print("\n".join(shape_changes(cases, suite) for suite in SUITES[:2]))
+        return
     priors = (0.003, 0.01, 0.03) if args.grid else (Retargeter.REFINE_PRIOR_INVERT,)
     print("| fit | " + " | ".join(SUITES) + " |")
     print("| --- | " + " | ".join("---:" for _ in SUITES) + " |")
