@@ -309,10 +309,11 @@ class SourceRig:
 
     target: the source neutral prepared as a target; baked: its 53 decoded one-hot shapes (source
     units); basis: Aᵀ (53,3V) float32, the baked deltas flattened; gram: AᵀA (53,53) float64, whose
-    ridge factors (one per prior, the pull towards the encoder's estimate, and balance) are made when first
-    used (factors); rest (made on first use): the indices of the face's vertices the baked shapes
-    move least (``retarget.stabilise.rest_vertices``, in the mesh's indexing), on which a frame's
-    head motion is fitted (``Retargeter.stabilise_frames``). With the basis decoder also free_basis:
+    ridge factors (one per prior, the pull towards the encoder's estimate, and balance) are made
+    when first used (factors); rest (made on first use): the indices of the face's vertices the
+    baked shapes move least (``retarget.stabilise.rest_vertices``, in the mesh's indexing), on
+    which a frame's head motion is fitted (``Retargeter.stabilise_frames``). With the basis
+    decoder also free_basis:
     F (code_dim − 53, 3V) float32, the rig's columns of the free dims of z_GE (source units),
     and its factor free_chol with ridge free_ridge (``fit_free``, prior ``free_prior``); None for
     the MLP decoder. Made once per neutral.

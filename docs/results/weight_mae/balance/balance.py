@@ -27,7 +27,7 @@ from types import SimpleNamespace
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
-from cases import SUITES, load, row_kinds, weight_mae  # noqa: E402
+from cases import SUITES, load, table_row  # noqa: E402
 
 from retarget.api import Retargeter, SourceRig  # noqa: E402
 
@@ -44,23 +44,10 @@ def fitted(case: dict, prior: float, balance: float) -> np.ndarray:
 
 
 def row(cases, name: str, prior: float | None = None, balance: float = 0.0) -> str:
-    """A markdown row: per suite the MAE over all rows (uniform rows) of the fit, or of predicting
-    0 when ``prior`` is None."""
-    cells = []
-    for suite in SUITES:
-        errs, kinds = [], []
-        for c in cases:
-            if str(c["suite"]) != suite:
-                continue
-            w = np.zeros_like(c["w0"]) if prior is None else fitted(c, prior, balance)
-            errs.append(weight_mae(c, w))
-            kinds.append(row_kinds(c))
-        if not errs:
-            cells.append("—")
-            continue
-        e, k = np.concatenate(errs), np.concatenate(kinds)
-        cells.append(f"{e.mean():.4f} ({e[k == 'uniform'].mean():.3f})")
-    return f"| {name} | " + " | ".join(cells) + " |"
+    """A markdown row (``cases.table_row``): per suite the MAE over all rows (uniform rows) of the
+    fit, or of predicting 0 when ``prior`` is None."""
+    return table_row(cases, name, zero=prior is None,
+                     fit_fn=lambda case, shapes: fitted(case, prior, balance))
 
 
 def shape_changes(cases, suite: str, balance: float = 0.5, shown: int = 8) -> str:

@@ -135,9 +135,12 @@ def row_kinds(case: dict) -> np.ndarray:
     return np.where(nnz > 5, "uniform", np.where((nnz == 1) & (gt.max(1) == 1), "onehot", "sparse"))
 
 
-def table_row(cases, name: str, shapes_of=None, suites=SUITES, zero: bool = False, **fit_args) -> str:
-    """One markdown row: per suite the MAE over all rows (and over the uniform rows) of ``fit``
-    (or of predicting 0: ``zero``)."""
+def table_row(cases, name: str, shapes_of=None, suites=SUITES, zero: bool = False, fit_fn=None,
+              **fit_args) -> str:
+    """One markdown row: per suite the MAE over all rows (and over the uniform rows) of ``fit``,
+    or of ``fit_fn(case, shapes, **fit_args)`` -> (T, 53) when given (or of predicting 0:
+    ``zero``); "—" for a suite without cases."""
+    fit_fn = fit if fit_fn is None else fit_fn
     cells = []
     for suite in suites:
         errs, kinds = [], []
@@ -145,9 +148,12 @@ def table_row(cases, name: str, shapes_of=None, suites=SUITES, zero: bool = Fals
             if str(c["suite"]) != suite:
                 continue
             w = (np.zeros_like(c["w0"]) if zero else
-                 fit(c, None if shapes_of is None else shapes_of(c), **fit_args))
+                 fit_fn(c, None if shapes_of is None else shapes_of(c), **fit_args))
             errs.append(weight_mae(c, w))
             kinds.append(row_kinds(c))
+        if not errs:
+            cells.append("—")
+            continue
         e, k = np.concatenate(errs), np.concatenate(kinds)
         cells.append(f"{e.mean():.4f} ({e[k == 'uniform'].mean():.3f})")
     return f"| {name} | " + " | ".join(cells) + " |"
