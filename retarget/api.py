@@ -388,7 +388,7 @@ class SourceRig:
         return w, f.astype(np.float32)
 
     def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float, sparsity: float = 0.0,
-            reweight: tuple = (), balance: float = 0.0) -> np.ndarray:
+            reweight: tuple = (), balance: float = 0.0, dense: tuple = ()) -> np.ndarray:
         """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + Σ_k λ_k (w_k − w0_k)² +
         Σ_k μ_k w_k, λ_k = prior · s_k, μ_k = sparsity · s_k (an L1 pull towards 0, which on
         w ≥ 0 is linear), s_k = ``pull_scales(AᵀA, balance)``: with ``balance`` 0 the mean
@@ -404,7 +404,13 @@ class SourceRig:
         reweight: (μ_max, ε, passes) for reweighted L1 (Candès, Wakin and Boyd 2008): after the
         fit above, ``passes`` more fits with a pull of μ_max · ε / (w_k + ε) on each weight, w the
         previous pass's: weights the frame needs are barely pulled, the small ones a fit spreads
-        over many shapes are pulled hard towards 0 (μ_k = that pull · s_k). () = off."""
+        over many shapes are pulled hard towards 0 (μ_k = that pull · s_k). () = off.
+
+        dense: (count, threshold, prior, balance): a frame whose fitted weights (after the
+        reweighting) have more than ``count`` above ``threshold`` moves much of the face at once,
+        where a pull towards 0 only shrinks weights the frame needs; it is fitted again without
+        the L1 pull, with that ``prior`` and ``balance`` (docs/RESULTS.md, "Frames that move many
+        shapes: fitted again without the pull towards 0"). () = off."""
         key = (prior, balance)
         if key not in self.factors:
             scales = pull_scales(self.gram, balance)
@@ -418,6 +424,10 @@ class SourceRig:
             mu_max, eps, passes = reweight
             for _ in range(int(passes)):
                 w = self._bounded_solve(chol, h, mu_max * eps / (w.astype(np.float64) + eps), scales)
+        if dense:
+            count, threshold, dense_prior, dense_balance = dense
+            if int(np.count_nonzero(w > threshold)) > count:
+                return self.fit(frame, w0, dense_prior, 0.0, (), dense_balance)
         return w
 
     def _bounded_solve(self, chol: np.ndarray, h: np.ndarray, sparsity,
@@ -473,12 +483,16 @@ class Retargeter:
     #: ``balance``: 0.5 pulls each weight in proportion to the geometric mean of its shape's size
     #: and the mean size; transfer's fit keeps ``REFINE_BALANCE`` 0, every weight alike)
     REFINE_BALANCE_INVERT = 0.5
-    #: invert's fit (prior, sparsity, reweight, balance) with a code map (the four above) and
-    #: without one (the fit tuned before the map, better there on realistic heads): the code_map
-    #: setter puts the one that fits in the four attributes of the instance
+    #: a frame invert's fit reads as moving many shapes (more than 20 of the 53 weights above
+    #: 0.05) is fitted again without the L1 pull, prior 0.01, balance 0.25 (``SourceRig.fit``'s
+    #: ``dense``; () = never)
+    REFINE_DENSE_INVERT = (20, 0.05, 0.01, 0.25)
+    #: invert's fit (prior, sparsity, reweight, balance, dense) with a code map (the five above)
+    #: and without one (the fit tuned before the map, better there on realistic heads): the
+    #: code_map setter puts the one that fits in the five attributes of the instance
     REFINE_INVERT_FITS = {True: (REFINE_PRIOR_INVERT, REFINE_SPARSITY_INVERT, REFINE_REWEIGHT_INVERT,
-                                 REFINE_BALANCE_INVERT),
-                          False: (0.1, 0.02, (0.1, 0.05, 2), 0.0)}
+                                 REFINE_BALANCE_INVERT, REFINE_DENSE_INVERT),
+                          False: (0.1, 0.02, (0.1, 0.05, 2), 0.0, ())}
     REFINE_FREE_PRIOR = 1e-3
     REFINE_JOINT = True
     REFINE_JOINT_INVERT = False
@@ -529,7 +543,8 @@ class Retargeter:
         except ValueError as e:
             raise RetargetError(str(e)) from None
         (self.REFINE_PRIOR_INVERT, self.REFINE_SPARSITY_INVERT, self.REFINE_REWEIGHT_INVERT,
-         self.REFINE_BALANCE_INVERT) = self.REFINE_INVERT_FITS[self._code_map is not None]
+         self.REFINE_BALANCE_INVERT, self.REFINE_DENSE_INVERT) = self.REFINE_INVERT_FITS[
+            self._code_map is not None]
         self._source_rigs.clear()
 
     @property
@@ -776,16 +791,14 @@ class Retargeter:
         ``refine``: analysis-by-synthesis on the source's own baked rig (needs ``source_neutral``;
         see ``refine``), the weights pulled towards the encoder's with ``REFINE_PRIOR_INVERT`` and
         towards 0 with ``REFINE_SPARSITY_INVERT``, reweighted by ``REFINE_REWEIGHT_INVERT``, each
-        pull shared between the shapes by ``REFINE_BALANCE_INVERT``. A
+        pull shared between the shapes by ``REFINE_BALANCE_INVERT``, a frame that moves many
+        shapes fitted again by ``REFINE_DENSE_INVERT`` (``invert_fit``). A
         source with eyeballs (``source_eyes``) gives its eight look weights from their turn
         (``source_gaze``, ``retarget.eyes.weights_from_gaze``)."""
         z = self.encode(frames, source_neutral, progress)
         w = z[..., :N_FACS]
         if refine:
-            w = self.refine_fit(frames, source_neutral, z, self.REFINE_PRIOR_INVERT,
-                                self.REFINE_SPARSITY_INVERT, self.REFINE_JOINT_INVERT,
-                                self.REFINE_REWEIGHT_INVERT,
-                                self.REFINE_BALANCE_INVERT)[0].reshape(w.shape)
+            w = self.invert_fit(frames, source_neutral, z).reshape(w.shape)
         eyes = self.source_eyes(frames, source_neutral)
         if eyes is not None:                                        # the looks its eyeballs show
             gaze = self._measured_gaze(eyes, frames, source_neutral)
@@ -793,6 +806,16 @@ class Retargeter:
         if smooth and w.ndim == 2:
             w = smooth_codes(w, smooth, fps)
         return np.clip(w, 0.0, 1.0).astype(np.float32)
+
+    def invert_fit(self, frames, source_neutral: Mesh, z_ge: np.ndarray) -> np.ndarray:
+        """Invert's weights by analysis-by-synthesis: ``refine_fit`` with invert's settings
+        (``REFINE_PRIOR_INVERT``, ``REFINE_SPARSITY_INVERT``, ``REFINE_JOINT_INVERT``,
+        ``REFINE_REWEIGHT_INVERT``, ``REFINE_BALANCE_INVERT``, ``REFINE_DENSE_INVERT``) -> (T,53)
+        float32, as ``invert`` takes them before the gaze, smoothing and clipping."""
+        return self.refine_fit(frames, source_neutral, z_ge, self.REFINE_PRIOR_INVERT,
+                               self.REFINE_SPARSITY_INVERT, self.REFINE_JOINT_INVERT,
+                               self.REFINE_REWEIGHT_INVERT, self.REFINE_BALANCE_INVERT,
+                               self.REFINE_DENSE_INVERT)[0]
 
     # --------------------------------------------------------------------------- analysis by synthesis
     def source_rig(self, source_neutral: Mesh) -> SourceRig:
@@ -894,7 +917,7 @@ class Retargeter:
     def refine_fit(self, frames, source_neutral: Mesh, z_ge: np.ndarray,
                    prior: float | None = None, sparsity: float | None = None,
                    joint: bool | None = None, reweight: tuple = (),
-                   balance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   balance: float | None = None, dense: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
         """Analysis-by-synthesis: the decoder's rig baked on the source's own neutral (once,
         ``source_rig``) is fitted to each frame by bounded least squares in [0,1] with the encoder's
         weights z_GE[:53] as the prior (``SourceRig.fit``); then the free dims of the code are
@@ -910,7 +933,8 @@ class Retargeter:
         together (``SourceRig.fit_joint``, basis decoder; default ``REFINE_JOINT``). reweight:
         reweighted L1 of the weights-alone fit (``SourceRig.fit``; () = off); balance: how that
         fit shares its pulls between large and small shapes (``SourceRig.fit``; default
-        ``REFINE_BALANCE``; the joint fit pulls every weight alike). The frames' head
+        ``REFINE_BALANCE``; the joint fit pulls every weight alike); dense: that fit's second fit
+        of a frame that moves many shapes (``SourceRig.fit``; () = off). The frames' head
         motion is removed first (``stabilise_frames``, unless ``stabilise`` is off)."""
         if source_neutral is None:
             raise RetargetError("refine needs the source's neutral (source_neutral= in the API, "
@@ -932,7 +956,8 @@ class Retargeter:
                     out[i, :N_FACS], out[i, N_FACS:] = rig.fit_joint(frame.vertices, w0, prior,
                                                                      sparsity)
                     continue
-                out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity, reweight, balance)
+                out[i, :N_FACS] = rig.fit(frame.vertices, w0, prior, sparsity, reweight, balance,
+                                          dense)
                 if rig.free_basis is not None:
                     out[i, N_FACS:] = rig.fit_free(frame.vertices, out[i, :N_FACS])
             if rig.free_basis is None and self.refine_steps > 0:

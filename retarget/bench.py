@@ -279,10 +279,7 @@ def bench_network(r, target, frames, source_neutral, weights, repeats: int) -> d
     out["invert_refine"]["added_ms"] = 1000 * latency(                     # the fit, bake reused
         lambda i: r.refine(frames[i], source_neutral, codes[i]), list(range(len(frames))))
     out["invert_refine"]["added_invert_ms"] = 1000 * latency(              # invert's own fit
-        lambda i: r.refine(frames[i], source_neutral, codes[i], prior=r.REFINE_PRIOR_INVERT,
-                           sparsity=r.REFINE_SPARSITY_INVERT, joint=r.REFINE_JOINT_INVERT,
-                           reweight=r.REFINE_REWEIGHT_INVERT, balance=r.REFINE_BALANCE_INVERT),
-        list(range(len(frames))))
+        lambda i: r.invert_fit(frames[i], source_neutral, codes[i]), list(range(len(frames))))
     if r.cfg.decoder == "mlp":   # and with gradient steps on the free dims (a basis decoder solves
         steps, r.refine_steps = r.refine_steps, REFINE_STEPS   # them in the plain refine already)
         out["invert_refine"][f"added_ms_{REFINE_STEPS}_steps"] = 1000 * latency(

@@ -120,11 +120,16 @@ def test_refine_fits_the_mapped_rig_and_returns_its_codes(rig):
     # invert returns the fitted weights, not the code's first dims
     inv = r.invert([frame], source_neutral=neutral, refine=True)
     w_inv, _ = r.refine_fit([frame], neutral, z, r.REFINE_PRIOR_INVERT, r.REFINE_SPARSITY_INVERT,
-                            r.REFINE_JOINT_INVERT, r.REFINE_REWEIGHT_INVERT, r.REFINE_BALANCE_INVERT)
+                            r.REFINE_JOINT_INVERT, r.REFINE_REWEIGHT_INVERT, r.REFINE_BALANCE_INVERT,
+                            r.REFINE_DENSE_INVERT)
     np.testing.assert_allclose(inv, np.clip(w_inv, 0, 1), rtol=1e-6)
+    np.testing.assert_array_equal(r.invert_fit([frame], neutral, z), w_inv)
+    sparse, _ = r.refine_fit([frame], neutral, z, r.REFINE_PRIOR_INVERT, r.REFINE_SPARSITY_INVERT,
+                             r.REFINE_JOINT_INVERT, r.REFINE_REWEIGHT_INVERT, r.REFINE_BALANCE_INVERT)
     alike, _ = r.refine_fit([frame], neutral, z, r.REFINE_PRIOR_INVERT, r.REFINE_SPARSITY_INVERT,
                             r.REFINE_JOINT_INVERT, r.REFINE_REWEIGHT_INVERT, 0.0)
-    assert r.REFINE_BALANCE_INVERT > 0 and np.abs(alike - w_inv).max() > 1e-3   # the balance is used
+    assert r.REFINE_BALANCE_INVERT > 0 and np.abs(alike - sparse).max() > 1e-3   # the balance is used
+    assert np.abs(sparse - w_inv).max() > 1e-3   # a frame of every shape is fitted again (dense)
     assert inv.shape == (1, 53) and r.invert(frame, source_neutral=neutral, refine=True).shape == (53,)
 
 
@@ -325,7 +330,7 @@ def test_invert_fits_with_the_settings_tuned_with_or_without_a_map():
 
     def fit_of(obj):
         return (obj.REFINE_PRIOR_INVERT, obj.REFINE_SPARSITY_INVERT, obj.REFINE_REWEIGHT_INVERT,
-                obj.REFINE_BALANCE_INVERT)
+                obj.REFINE_BALANCE_INVERT, obj.REFINE_DENSE_INVERT)
 
     assert fit_of(r) == fits[False]
     r.code_map = random_map(model.cfg.code_dim)

@@ -264,6 +264,30 @@ def test_balanced_fit_pulls_small_shapes_less():
     assert errors[0.5] < 0.5 * errors[0.0]
 
 
+def test_dense_frames_are_fitted_again_without_the_l1_pull():
+    """SourceRig.fit with dense (count, threshold, prior, balance): a frame that moves every shape
+    (each its own vertex, weight 0.6) is fitted again without the L1 pull, so its weights come back
+    nearer 0.6 than the sparse fit's, and are the plain fit with the dense prior and balance; a frame
+    of three shapes keeps the sparse fit bit for bit."""
+    sizes = np.linspace(0.2, 1.0, 53)
+    deltas = np.zeros((53, 60, 3), np.float32)
+    deltas[np.arange(53), np.arange(53), 1] = sizes
+    neutral = np.random.default_rng(7).random((60, 3)).astype(np.float32)
+    src = SourceRig.make(None, BakedRig(neutral, deltas))
+    w0 = np.full(53, 0.3, np.float32)
+    sparse = dict(prior=0.01, sparsity=0.05, reweight=(0.2, 0.05, 2), balance=0.5)
+    dense = (20, 0.05, 0.02, 0.25)
+    every = neutral + 0.6 * deltas.sum(0)
+    before = src.fit(every, w0, **sparse)
+    after = src.fit(every, w0, **sparse, dense=dense)
+    assert (before > 0.05).sum() > 20                              # read as moving many shapes
+    np.testing.assert_array_equal(after, src.fit(every, w0, 0.02, balance=0.25))
+    assert np.abs(after - 0.6).mean() < np.abs(before - 0.6).mean()
+    few = neutral + 0.7 * deltas[[3, 20, 40]].sum(0)
+    np.testing.assert_array_equal(src.fit(few, w0, **sparse, dense=dense), src.fit(few, w0, **sparse))
+    assert (src.fit(few, w0, **sparse) > 0.05).sum() <= 20
+
+
 def test_reweighted_fit_leaves_the_unused_shapes_at_0(rig):
     """SourceRig.fit with reweight: a frame of a few shapes, with the prior pulling every weight
     towards 0.2, is explained by weights nearer the true ones than the plain L1 fit's, with less

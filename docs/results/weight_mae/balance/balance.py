@@ -22,23 +22,20 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
-from cases import SUITES, load, table_row  # noqa: E402
+from cases import SUITES, load, source_rig, table_row  # noqa: E402
 
-from retarget.api import Retargeter, SourceRig  # noqa: E402
+from retarget.api import Retargeter  # noqa: E402
 
 SPARSITY, REWEIGHT = Retargeter.REFINE_SPARSITY_INVERT, Retargeter.REFINE_REWEIGHT_INVERT
 
 
 def fitted(case: dict, prior: float, balance: float) -> np.ndarray:
     """Invert's fit of every frame of ``case`` on its baked rig -> weights (T, 53)."""
-    a = np.ascontiguousarray(case["A"], np.float32)
-    rig = SourceRig(None, SimpleNamespace(neutral=np.asarray(case["neutral"], np.float32)), a,
-                    a.astype(np.float64) @ a.T.astype(np.float64))
+    rig = source_rig(case)
     return np.array([rig.fit(frame, np.clip(w0, 0.0, 1.0), prior, SPARSITY, REWEIGHT, balance)
                      for frame, w0 in zip(case["frames"], case["w0"])])
 

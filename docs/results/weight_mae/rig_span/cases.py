@@ -17,7 +17,8 @@ suites E_true, the same on the true one-hot frames (docs/results/weight_mae/cali
 
 ``--seed`` without ``--config``: the tuning set (configs/eval/study.yaml, test identities apart from
 the eval's). ``load`` reads a file back; ``fit`` is invert's weights fit (``SourceRig.fit``) with
-optional per-vertex weights; ``weight_mae`` the eval's MAE.
+optional per-vertex weights; ``source_rig`` a case's rig for the API's own fit; ``weight_mae`` the
+eval's MAE.
 """
 from __future__ import annotations
 
@@ -81,6 +82,18 @@ def load(*paths) -> list[dict]:
         n = len({k.split("/")[0] for k in z.files})
         cases += [{k.split("/")[1]: z[k] for k in z.files if k.startswith(f"{i}/")} for i in range(n)]
     return cases
+
+
+def source_rig(case: dict):
+    """The case's baked rig as ``retarget.api.SourceRig`` (its shapes A, neutral and Gram
+    matrix), for fits by the API's own ``SourceRig.fit``."""
+    from types import SimpleNamespace
+
+    from retarget.api import SourceRig
+
+    a = np.ascontiguousarray(case["A"], np.float32)
+    return SourceRig(None, SimpleNamespace(neutral=np.asarray(case["neutral"], np.float32)), a,
+                     a.astype(np.float64) @ a.T.astype(np.float64))
 
 
 def _bounded(chol, h, mu, mean_diag):
