@@ -472,13 +472,14 @@ class Retargeter:
     #: weights must say); source rigs kept baked; vertices decoded per gradient step of the
     #: free-dims refinement (MLP decoder). Tuned on a tuning set apart from the eval's test set
     #: (docs/RESULTS.md, "Stage 7", "Refine: weights and free dims fitted together",
-    #: "Inverse rigging's weights" and, for invert's fit, "The code map").
+    #: "Inverse rigging's weights" and, for invert's fit, "The code map" and "Frames that move many
+    #: shapes").
     REFINE_PRIOR = 1e-3
     REFINE_SPARSITY = 0.0
     REFINE_BALANCE = 0.0
-    REFINE_PRIOR_INVERT = 0.01
+    REFINE_PRIOR_INVERT = 0.003
     REFINE_SPARSITY_INVERT = 0.002
-    REFINE_REWEIGHT_INVERT = (0.02, 0.05, 2)
+    REFINE_REWEIGHT_INVERT = (0.05, 0.05, 2)
     #: how invert's pulls are shared between large and small shapes (``SourceRig.fit``'s
     #: ``balance``: 0.5 pulls each weight in proportion to the geometric mean of its shape's size
     #: and the mean size; transfer's fit keeps ``REFINE_BALANCE`` 0, every weight alike)

@@ -1,0 +1,74 @@
+"""Invert's fit retuned around the dense second fit (docs/RESULTS.md, "Frames that move many
+shapes"): the first fit's prior and reweighted L1 pull, and the second fit's balance, offline on the
+inversion cases of docs/results/weight_mae/rig_span/cases.py. Candidates from a grid on the tuning
+set's procedural and realistic heads (prior 0.003 / 0.01 / 0.03, sparsity 0.002 / 0.005,
+reweighted L1 0.02 / 0.05, balance 0.25 / 0.5 / 0.75, the second fit's balance 0.25 / 0.5 / 0.75
+and prior 0.003 / 0.01: the best of each kind of head below). Prints one markdown row per
+candidate: the weight MAE per suite over all rows (uniform rows in brackets), and with ``--kinds``
+the one-hot and sparse rows' MAE too.
+
+    python docs/results/weight_mae/dense/retune.py runs/fitstudy/tuning10{0,1,2,3,4}.npz
+    python docs/results/weight_mae/dense/retune.py runs/fitstudy/val_large.npz
+    python docs/results/weight_mae/dense/retune.py runs/fitstudy/val_large.npz --kinds
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
+from cases import SUITES, load, row_kinds, source_rig, table_row, weight_mae  # noqa: E402
+
+#: name -> (prior, sparsity, reweighted L1 μ_max, balance, the second fit's prior, its balance)
+CANDIDATES = {
+    "bundled: prior 0.01, reweight 0.02, second fit balance 0.25": (0.01, 0.002, 0.02, 0.5, 0.01, 0.25),
+    "reweight 0.05": (0.01, 0.002, 0.05, 0.5, 0.01, 0.25),
+    "prior 0.003": (0.003, 0.002, 0.02, 0.5, 0.01, 0.25),
+    "prior 0.003, reweight 0.05 (best of the realistic heads)": (0.003, 0.002, 0.05, 0.5, 0.01, 0.25),
+    "prior 0.003, reweight 0.05, second fit balance 0.5 (best of the procedural heads)": (0.003, 0.002, 0.05, 0.5, 0.01, 0.5),
+}
+
+
+def fitted(case: dict, prior, sparsity, mu, balance, dense_prior, dense_balance) -> np.ndarray:
+    """Invert's fit of every frame of ``case`` with these settings -> (T, 53)."""
+    rig = source_rig(case)
+    return np.array([rig.fit(frame, np.clip(w0, 0.0, 1.0), prior, sparsity, (mu, 0.05, 2), balance,
+                             (20, 0.05, dense_prior, dense_balance))
+                     for frame, w0 in zip(case["frames"], case["w0"])])
+
+
+def by_kind(cases, name: str, settings: tuple) -> str:
+    """A markdown row: per suite the MAE of the one-hot / sparse rows."""
+    cells = []
+    for suite in SUITES:
+        errs, kinds = [], []
+        for c in cases:
+            if str(c["suite"]) == suite:
+                errs.append(weight_mae(c, fitted(c, *settings)))
+                kinds.append(row_kinds(c))
+        e, k = np.concatenate(errs), np.concatenate(kinds)
+        cells.append(f"{e[k == 'onehot'].mean():.4f} / {e[k == 'sparse'].mean():.4f}")
+    return f"| {name} | " + " | ".join(cells) + " |"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("cases", nargs="+")
+    ap.add_argument("--kinds", action="store_true", help="the one-hot / sparse rows' MAE instead")
+    args = ap.parse_args()
+    cases = load(*args.cases)
+    print(f"| fit{' (one-hot / sparse rows)' if args.kinds else ''} | " + " | ".join(SUITES) + " |")
+    print("| --- | " + " | ".join("---:" for _ in SUITES) + " |")
+    if not args.kinds:
+        print(table_row(cases, "predicting 0", zero=True), flush=True)
+    for name, settings in CANDIDATES.items():
+        row = (by_kind(cases, name, settings) if args.kinds else
+               table_row(cases, name, fit_fn=lambda c, _, s=settings: fitted(c, *s)))
+        print(row, flush=True)
+
+
+if __name__ == "__main__":
+    main()
