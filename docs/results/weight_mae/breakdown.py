@@ -85,9 +85,9 @@ VARIANTS = {
 #: the variants were run before invert's fit had its balance and its second fit for dense frames
 #: (docs/RESULTS.md, "Invert's pulls in proportion to each shape", "Frames that move many
 #: shapes"): every one but "bundled" keeps both off, so its rows come out as they were written
-for _name, _attributes in VARIANTS.items():
-    if _name != "bundled":
-        VARIANTS[_name] = {"REFINE_BALANCE_INVERT": 0.0, "REFINE_DENSE_INVERT": (), **_attributes}
+VARIANTS = {name: attributes if name == "bundled" else
+            {"REFINE_BALANCE_INVERT": 0.0, "REFINE_DENSE_INVERT": (), **attributes}
+            for name, attributes in VARIANTS.items()}
 #: the variants of the code map's retune (``--variants`` of its command in docs/RESULTS.md)
 CODE_MAP_RETUNE = ["fit before the code map's retune"] + [f"prior {p}, sparsity {s0}, reweight {mu}" for p in (0.005, 0.01, 0.02)
                                  for s0 in (0.002, 0.005, 0.01) for mu in (0.02, 0.05)]

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
-from cases import SUITES, load, source_rig, table_row  # noqa: E402
+from cases import SUITES, api_fit, load, table_row  # noqa: E402
 
 
 #: invert's fit as this study ran it (before section "Frames that move many shapes" retuned it)
@@ -35,9 +35,7 @@ PRIOR, SPARSITY, REWEIGHT = 0.01, 0.002, (0.02, 0.05, 2)
 
 def fitted(case: dict, prior: float, balance: float) -> np.ndarray:
     """Invert's fit of every frame of ``case`` on its baked rig -> weights (T, 53)."""
-    rig = source_rig(case)
-    return np.array([rig.fit(frame, np.clip(w0, 0.0, 1.0), prior, SPARSITY, REWEIGHT, balance)
-                     for frame, w0 in zip(case["frames"], case["w0"])])
+    return api_fit(case, prior, SPARSITY, REWEIGHT, balance)
 
 
 def row(cases, name: str, prior: float | None = None, balance: float = 0.0) -> str:

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
-from cases import SUITES, load, source_rig, table_row, weight_mae  # noqa: E402
+from cases import SUITES, api_fit, load, table_row, weight_mae  # noqa: E402
 
 #: the first fit as this study ran it: invert's before the retune of retune.py (prior, sparsity,
 #: reweight, balance)
@@ -36,9 +36,7 @@ SECOND = ((0.01, 0.5), (0.01, 0.25), (0.03, 0.5))
 
 def fitted(case: dict, dense: tuple = ()) -> np.ndarray:
     """Invert's fit of every frame of ``case`` on its baked rig, with ``dense`` -> (T, 53)."""
-    rig = source_rig(case)
-    return np.array([rig.fit(frame, np.clip(w0, 0.0, 1.0), *FIRST, dense=dense)
-                     for frame, w0 in zip(case["frames"], case["w0"])])
+    return api_fit(case, *FIRST, dense=dense)
 
 
 def by_the_truth(case: dict) -> np.ndarray:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
-from cases import SUITES, load, row_kinds, source_rig, table_row, weight_mae  # noqa: E402
+from cases import SUITES, api_fit, load, table_row  # noqa: E402
 
 #: name -> (prior, sparsity, reweighted L1 μ_max, balance, the second fit's prior, its balance)
 CANDIDATES = {
@@ -34,24 +34,13 @@ CANDIDATES = {
 
 def fitted(case: dict, prior, sparsity, mu, balance, dense_prior, dense_balance) -> np.ndarray:
     """Invert's fit of every frame of ``case`` with these settings -> (T, 53)."""
-    rig = source_rig(case)
-    return np.array([rig.fit(frame, np.clip(w0, 0.0, 1.0), prior, sparsity, (mu, 0.05, 2), balance,
-                             (20, 0.05, dense_prior, dense_balance))
-                     for frame, w0 in zip(case["frames"], case["w0"])])
+    return api_fit(case, prior, sparsity, (mu, 0.05, 2), balance,
+                   (20, 0.05, dense_prior, dense_balance))
 
 
-def by_kind(cases, name: str, settings: tuple) -> str:
-    """A markdown row: per suite the MAE of the one-hot / sparse rows."""
-    cells = []
-    for suite in SUITES:
-        errs, kinds = [], []
-        for c in cases:
-            if str(c["suite"]) == suite:
-                errs.append(weight_mae(c, fitted(c, *settings)))
-                kinds.append(row_kinds(c))
-        e, k = np.concatenate(errs), np.concatenate(kinds)
-        cells.append(f"{e[k == 'onehot'].mean():.4f} / {e[k == 'sparse'].mean():.4f}")
-    return f"| {name} | " + " | ".join(cells) + " |"
+def one_hot_and_sparse(errors: np.ndarray, kinds: np.ndarray) -> str:
+    """A ``table_row`` cell for ``--kinds``: the MAE of the one-hot / sparse rows."""
+    return f"{errors[kinds == 'onehot'].mean():.4f} / {errors[kinds == 'sparse'].mean():.4f}"
 
 
 def main():
@@ -65,9 +54,8 @@ def main():
     if not args.kinds:
         print(table_row(cases, "predicting 0", zero=True), flush=True)
     for name, settings in CANDIDATES.items():
-        row = (by_kind(cases, name, settings) if args.kinds else
-               table_row(cases, name, fit_fn=lambda c, _, s=settings: fitted(c, *s)))
-        print(row, flush=True)
+        print(table_row(cases, name, fit_fn=lambda c, _, s=settings: fitted(c, *s),
+                        cell=one_hot_and_sparse if args.kinds else None), flush=True)
 
 
 if __name__ == "__main__":

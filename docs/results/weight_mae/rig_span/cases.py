@@ -17,7 +17,7 @@ suites E_true, the same on the true one-hot frames (docs/results/weight_mae/cali
 
 ``--seed`` without ``--config``: the tuning set (configs/eval/study.yaml, test identities apart from
 the eval's). ``load`` reads a file back; ``fit`` is invert's weights fit (``SourceRig.fit``) with
-optional per-vertex weights; ``source_rig`` a case's rig for the API's own fit; ``weight_mae`` the
+optional per-vertex weights; ``api_fit`` the API's own fit of a case's frames; ``weight_mae`` the
 eval's MAE.
 """
 from __future__ import annotations
@@ -84,16 +84,19 @@ def load(*paths) -> list[dict]:
     return cases
 
 
-def source_rig(case: dict):
-    """The case's baked rig as ``retarget.api.SourceRig`` (its shapes A, neutral and Gram
-    matrix), for fits by the API's own ``SourceRig.fit``."""
+def api_fit(case: dict, *fit_args, **fit_kwargs) -> np.ndarray:
+    """The API's own ``SourceRig.fit`` of every frame of ``case`` on its baked rig A, the encoder's
+    weights clipped to [0, 1] as the estimate: ``SourceRig.fit(frame, w0, *fit_args,
+    **fit_kwargs)`` per frame -> weights (T, 53)."""
     from types import SimpleNamespace
 
     from retarget.api import SourceRig
 
     a = np.ascontiguousarray(case["A"], np.float32)
-    return SourceRig(None, SimpleNamespace(neutral=np.asarray(case["neutral"], np.float32)), a,
-                     a.astype(np.float64) @ a.T.astype(np.float64))
+    rig = SourceRig(None, SimpleNamespace(neutral=np.asarray(case["neutral"], np.float32)), a,
+                    a.astype(np.float64) @ a.T.astype(np.float64))
+    return np.array([rig.fit(frame, np.clip(w0, 0.0, 1.0), *fit_args, **fit_kwargs)
+                     for frame, w0 in zip(case["frames"], case["w0"])])
 
 
 def _bounded(chol, h, mu, mean_diag):
@@ -149,10 +152,11 @@ def row_kinds(case: dict) -> np.ndarray:
 
 
 def table_row(cases, name: str, shapes_of=None, suites=SUITES, zero: bool = False, fit_fn=None,
-              **fit_args) -> str:
+              cell=None, **fit_args) -> str:
     """One markdown row: per suite the MAE over all rows (and over the uniform rows) of ``fit``,
     or of ``fit_fn(case, shapes, **fit_args)`` -> (T, 53) when given (or of predicting 0:
-    ``zero``); "—" for a suite without cases."""
+    ``zero``); "—" for a suite without cases. ``cell(errors (N,), kinds (N,))`` -> str, given the
+    suite's per-frame MAE and ``row_kinds``, writes another cell instead."""
     fit_fn = fit if fit_fn is None else fit_fn
     cells = []
     for suite in suites:
@@ -168,7 +172,7 @@ def table_row(cases, name: str, shapes_of=None, suites=SUITES, zero: bool = Fals
             cells.append("—")
             continue
         e, k = np.concatenate(errs), np.concatenate(kinds)
-        cells.append(f"{e.mean():.4f} ({e[k == 'uniform'].mean():.3f})")
+        cells.append(cell(e, k) if cell else f"{e.mean():.4f} ({e[k == 'uniform'].mean():.3f})")
     return f"| {name} | " + " | ".join(cells) + " |"
 
 
