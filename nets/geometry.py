@@ -49,7 +49,7 @@ import torch
 from scipy.spatial import cKDTree
 
 #: Bumped whenever the computation changes, so stale disk-cache entries are never reused.
-OPERATORS_VERSION = "nets.geometry/1"
+OPERATORS_VERSION = "nets.geometry/2"
 #: Neighbours used by the point-cloud Laplacian and for point-cloud gradients and normals.
 POINT_CLOUD_NEIGHBOURS = 30
 #: Below this vertex count the generalised eigenproblem is solved densely (robust, and cheap).
@@ -190,7 +190,9 @@ def eigen_decomposition(L: scipy.sparse.spmatrix, mass: np.ndarray, k: int, name
     L (V,V) sparse float64, mass (V,) float64. k is capped at V-2. Returns evals (k,) float64 >= 0
     (ascending; tiny negatives clamped to 0) and evecs (V,k) float64, M-orthonormal.
     Small problems (V <= DENSE_EIG_MAX_VERTICES) are solved densely; larger ones with ARPACK
-    shift-invert around 0 on ``L + eps M``, retrying with eps x 10 on failure.
+    shift-invert around 0 on ``L + eps M``, retrying with eps x 10 on failure. ARPACK starts
+    from a fixed vector (seeded by V), so one mesh gets the same eigenpairs whatever ran before
+    in the process (its own default start draws from a generator that calls advance).
     Raises ValueError naming ``name`` if no attempt converges.
     """
     n = L.shape[0]
@@ -200,13 +202,14 @@ def eigen_decomposition(L: scipy.sparse.spmatrix, mass: np.ndarray, k: int, name
     M = scipy.sparse.diags(mass)
     eps = EIG_SHIFT * float(mass.mean())
     errors = []
+    v0 = np.random.default_rng(n).standard_normal(n) if n > DENSE_EIG_MAX_VERTICES else None
     for _ in range(EIG_RETRIES + 1):
         shifted = (L + eps * M).tocsc()
         try:
             if n <= DENSE_EIG_MAX_VERTICES:
                 evals, evecs = scipy.linalg.eigh(shifted.toarray(), M.toarray(), subset_by_index=(0, k - 1))
             else:
-                evals, evecs = scipy.sparse.linalg.eigsh(shifted, k=k, M=M.tocsc(), sigma=0.0, which="LM")
+                evals, evecs = scipy.sparse.linalg.eigsh(shifted, k=k, M=M.tocsc(), sigma=0.0, which="LM", v0=v0)
         except (RuntimeError, ValueError, np.linalg.LinAlgError,
                 scipy.sparse.linalg.ArpackError, scipy.sparse.linalg.ArpackNoConvergence) as exc:
             errors.append(f"shift {eps:.1e}: {exc}")
