@@ -16,19 +16,18 @@
 # SKIP_INSTALL=1 for a dry run here, e.g. (the tiny model of the smoke test as INIT):
 #   PATH=.venv/bin:$PATH SKIP_INSTALL=1 CONFIG=tiny INIT=/tmp/smoke/model.pt WORKERS=1 TRAIN_S=10 MEASURE_STEPS=10 OUT=/tmp/gpu_out bash training/gpu/run.sh
 set -uo pipefail
-CONFIG=${CONFIG:-realistic_rig_authored_frozen_blind}   # the bundled stage 21's network (with its
-# blind encoder, which stays frozen) trained on as stage 19 was; its export fits the gated code
-# map, about a minute, so model.pt comes back with it. A config whose model differs from INIT's
-# stops at the first measuring run (retarget train: "the checkpoint's model does not match").
+CONFIG=${CONFIG:-realistic_rig_authored_decoder_neutral}   # the bundled stage 22's run: its
+# decoder alone trains, every source with its neutral, so frames without their neutral are read as
+# before (RESULTS "Stage 22"); its export fits the gated code map, about a minute, so model.pt
+# comes back with it. A config whose model differs from INIT's stops at the first measuring run
+# (retarget train: "the checkpoint's model does not match").
 INIT=${INIT:-retarget/checkpoints/default.pt}   # --init takes the network only, not its map
-LR=${LR:-2e-5}   # stage 19's: fresh schedules from stage 17 at 5e-5 and 1e-4 lost (RESULTS "Stage 18")
-# Judge what comes back on the ARKit rig without the neutral too: 3,000 CPU steps of CONFIG from
-# stage 21 left it 1.2-1.3x worse there, also with the blind encoder retrained after (RESULTS "The
-# network trained on with its blind encoder frozen"), for 2-5 % with the neutral; earlier, 2,500
-# CPU steps of a fresh schedule from stage 19 left it 40 % worse there at 2e-5 and 24 % at 5e-6,
-# while level or better
-# with the neutral (RESULTS "L_solve"); stage 19's own run resumed to 15,000 steps (training/stage20,
-# RESULTS "Stage 19") 10 % worse there frame by frame, 3-6 % better with the neutral and refine.
+LR=${LR:-5e-5}   # stage 22's
+# Judge what comes back on the ARKit rig without the neutral too: configs that also train the CNN
+# (whose image code the blind encoder reads), e.g. realistic_rig_authored_frozen_blind, left it
+# 1.2-1.3x worse there for 2-5 % with the neutral (RESULTS "The network trained on with its blind
+# encoder frozen"); the decoder alone, or with the identity and skinning encoders
+# (realistic_rig_authored_target_neutral), left it level (RESULTS "Stage 22").
 WORKERS=${WORKERS:-14}
 TRAIN_S=${TRAIN_S:-360}
 MEASURE_STEPS=${MEASURE_STEPS:-60}
