@@ -8,7 +8,9 @@ sparse, uniform), with the first fit before the retune and as bundled: the secon
 ``blink``: on the rows of one to five shapes with eyeBlink_L above 0.5 (the ICT-rigged suites), the
 fitted eyeBlink_L and eyeLookDown_L of the fit before the section, with the second fit, and
 bundled; with ``--demo`` instead on the realistic demo's source (``retarget demo``'s head and
-performance), by ``Retargeter.invert`` with those fits and the one before the balanced pulls.
+performance), by ``Retargeter.invert`` with those fits and the one before the balanced pulls, after
+the sizes (L2 norms of the (3V,) deltas, cm) of the true and baked eyeBlink_L and eyeLookDown_L and
+the true blink fitted by least squares on the two baked shapes.
 
     python docs/results/weight_mae/dense/checks.py counts runs/fitstudy/tuning10{0,1,2,3,4}.npz
     python docs/results/weight_mae/dense/checks.py blink runs/fitstudy/val_large.npz
@@ -79,6 +81,13 @@ def demo_blink() -> None:
     keep = w[:, FACS_INDEX["eyeBlink_L"]] > 0.5
     print(f"demo: {keep.sum()} frames with eyeBlink_L above 0.5 (true eyeLookDown_L there "
           f"{w[keep, FACS_INDEX['eyeLookDown_L']].mean():.3f})")
+    baked = np.asarray(r.source_rig(neutral).basis, np.float64)           # (53, 3V)
+    true = np.asarray(rig.deltas, np.float64).reshape(len(rig.deltas), -1)
+    b, d = FACS_INDEX["eyeBlink_L"], FACS_INDEX["eyeLookDown_L"]
+    mix = np.linalg.lstsq(baked[[b, d]].T, true[b], rcond=None)[0]
+    print(f"eyeBlink_L: true size {np.linalg.norm(true[b]):.2f}, baked {np.linalg.norm(baked[b]):.2f}; "
+          f"eyeLookDown_L: true {np.linalg.norm(true[d]):.2f}, baked {np.linalg.norm(baked[d]):.2f}; the true "
+          f"blink by least squares on the two baked shapes: {mix[0]:.2f} blink + {mix[1]:.2f} look down")
     for name, fit in (("before the balanced pulls", BEFORE[:3] + (0.0, ())), ("before", BEFORE),
                       ("second fit", SECOND), ("bundled", BUNDLED)):
         (r.REFINE_PRIOR_INVERT, r.REFINE_SPARSITY_INVERT, r.REFINE_REWEIGHT_INVERT,
