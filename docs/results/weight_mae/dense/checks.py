@@ -25,12 +25,17 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cases import api_fit, load, row_kinds  # noqa: E402
+from dense import FIRST  # noqa: E402
 
-#: (prior, sparsity, reweight, balance, dense) of invert's fit
-BEFORE = (0.01, 0.002, (0.02, 0.05, 2), 0.5, ())
-SECOND = (0.01, 0.002, (0.02, 0.05, 2), 0.5, (20, 0.05, 0.01, 0.25))
-BUNDLED = (0.003, 0.002, (0.05, 0.05, 2), 0.5, (20, 0.05, 0.01, 0.25))
+from retarget.api import Retargeter  # noqa: E402
+
+#: (prior, sparsity, reweight, balance, dense) of invert's fit: before the section (dense.py's
+#: first fit), with its second fit, and as bundled now
+BUNDLED = Retargeter.REFINE_INVERT_FITS[True]
+BEFORE = FIRST + ((),)
+SECOND = FIRST + (BUNDLED[4],)
 
 
 def counts(cases) -> None:
@@ -70,7 +75,6 @@ def blink(cases) -> None:
 
 def demo_blink() -> None:
     from data_synth.facs import FACS_INDEX
-    from retarget.api import Retargeter
     from retarget.commands.demo import HEADS, demo_mesh, performance
     from retarget.mesh import Mesh
 
