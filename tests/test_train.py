@@ -507,7 +507,6 @@ COMMITTED_STATES = {"stage17": "configs/train/realistic_rig_heavier.yaml",
                     "ablation_no_neutral_20": "configs/train/realistic_rig_authored_no_neutral.yaml",
                     "stage19": "configs/train/realistic_rig_authored.yaml",
                     "stage20": "configs/train/realistic_rig_authored.yaml",
-                    "stage22": "configs/train/realistic_rig_authored_decoder_neutral.yaml",
                     "stage23": "configs/train/realistic_rig_authored_decoder_neutral.yaml"}
 
 

@@ -16,13 +16,13 @@
 # SKIP_INSTALL=1 for a dry run here, e.g. (the tiny model of the smoke test as INIT):
 #   PATH=.venv/bin:$PATH SKIP_INSTALL=1 CONFIG=tiny INIT=/tmp/smoke/model.pt WORKERS=1 TRAIN_S=10 MEASURE_STEPS=10 OUT=/tmp/gpu_out bash training/gpu/run.sh
 set -uo pipefail
-CONFIG=${CONFIG:-realistic_rig_authored_decoder_neutral}   # the bundled stage 22's run: its
+CONFIG=${CONFIG:-realistic_rig_authored_decoder_neutral}   # the bundled stages 22-23's run: its
 # decoder alone trains, every source with its neutral, so frames without their neutral are read as
 # before (RESULTS "Stage 22"); its export fits the gated code map, about a minute, so model.pt
 # comes back with it. A config whose model differs from INIT's stops at the first measuring run
 # (retarget train: "the checkpoint's model does not match").
 INIT=${INIT:-retarget/checkpoints/default.pt}   # --init takes the network only, not its map
-LR=${LR:-5e-5}   # stage 22's
+LR=${LR:-5e-5}   # stages 22 and 23's
 # Judge what comes back on the ARKit rig without the neutral too: configs that also train the CNN
 # (whose image code the blind encoder reads), e.g. realistic_rig_authored_frozen_blind, left it
 # 1.2-1.3x worse there for 2-5 % with the neutral (RESULTS "The network trained on with its blind
