@@ -31,18 +31,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "rig_span"))
 import cases as rig_cases  # noqa: E402
 
 
-def retessellate(vertices: np.ndarray, faces: np.ndarray, seed: int):
-    """A new tessellation of the same piecewise-linear surface: subdivide once, collapse back to
-    about the input's vertex count, jitter inside triangles. -> (vertices (V',3), faces (F',3))."""
+def retessellate(vertices: np.ndarray, faces: np.ndarray, seed: int, kind: str = "remesh"):
+    """A new tessellation of the same piecewise-linear surface -> (vertices (V',3), faces (F',3)).
+    ``remesh``: subdivide once, collapse back to about the input's vertex count, jitter inside
+    triangles; ``jitter``: the input's faces, every vertex slid inside one of its triangles."""
     import scipy.sparse as sp
 
     from data_synth.makehuman.tessellate import _decimate, _jitter, _subdivide
 
     rng = np.random.default_rng(seed)
     n = len(vertices)
-    w = sp.identity(n, format="csr")
-    w, f = _subdivide(w, np.asarray(faces, np.int64))
-    w, f = _decimate(w, f, np.asarray(w @ vertices), n)
+    w, f = sp.identity(n, format="csr"), np.asarray(faces, np.int64)
+    if kind == "remesh":
+        w, f = _subdivide(w, f)
+        w, f = _decimate(w, f, np.asarray(w @ vertices), n)
     w = _jitter(w, f, rng)
     used = np.unique(f)
     remap = np.full(w.shape[0], -1, np.int64)
@@ -78,7 +80,7 @@ def closest_barycentric(points: np.ndarray, vertices: np.ndarray, faces: np.ndar
     return cf[first], bary / bary.sum(1, keepdims=True)
 
 
-def dump(seed: int, checkpoint: str | None, out: str, n_variants: int) -> None:
+def dump(seed: int, checkpoint: str | None, out: str, n_variants: int, kind: str = "remesh") -> None:
     from retarget.api import Retargeter
     from retarget.evaluate import EvalData, NetworkMethod, arkit_ict_matrix, load_eval_config
     from retarget.mesh import Mesh
@@ -96,7 +98,7 @@ def dump(seed: int, checkpoint: str | None, out: str, n_variants: int) -> None:
         rig = r.source_rig(neutral)
         variants = []
         for j in range(n_variants):
-            vv, vf = retessellate(neutral.vertices, neutral.faces, 1000 * seed + 97 * j + len(store))
+            vv, vf = retessellate(neutral.vertices, neutral.faces, 1000 * seed + 97 * j + len(store), kind)
             a = r.source_rig(Mesh(vv, vf)).basis.reshape(53, -1, 3)
             face, bary = closest_barycentric(np.asarray(neutral.vertices, np.float64), vv, vf)
             variants.append(np.einsum("kvcd,vc->kvd", a[:, vf[face]], bary).reshape(53, -1))
@@ -157,12 +159,14 @@ def main():
     ap.add_argument("--checkpoint", default=None)
     ap.add_argument("--variants", type=int, default=4)
     ap.add_argument("--out")
+    ap.add_argument("--kind", choices=("remesh", "jitter"), default="remesh",
+                    help="how each variant is made (retessellate)")
     ap.add_argument("--report", nargs="+")
     args = ap.parse_args()
     if args.report:
         report(args.report)
     else:
-        dump(args.seed, args.checkpoint, args.out, args.variants)
+        dump(args.seed, args.checkpoint, args.out, args.variants, args.kind)
 
 
 if __name__ == "__main__":
