@@ -31,7 +31,10 @@ SUITES = ("inverse", "head_inverse", "real_rig")
 
 
 def dump(config: str | None, seed: int, checkpoint: str | None, out: str,
-         readings: bool = False) -> None:
+         readings: bool = False, more=None) -> None:
+    """Write the cases (module docstring) to ``out``; ``more(r, neutral, index)`` -> dict, if given,
+    adds its arrays to each case (``r`` the Retargeter, ``neutral`` the case's source neutral Mesh,
+    ``index`` the case's number in the file)."""
     from retarget.api import Retargeter, basis_shapes
     from retarget.evaluate import EvalData, NetworkMethod, arkit_ict_matrix, load_eval_config
     from retarget.mesh import Mesh
@@ -53,6 +56,9 @@ def dump(config: str | None, seed: int, checkpoint: str | None, out: str,
         frames, neutral = method._source(case)
         z = r.encode(frames, source_neutral=neutral)
         rig = r.source_rig(neutral)
+        i = len({k.split("/")[0] for k in store})
+        if more is not None:
+            extra = {**(extra or {}), **more(r, neutral, i)}
         item = dict(suite=suite, A=rig.basis, neutral=rig.baked.neutral,
                     X=basis_shapes(rig.target, slice(None)).reshape(r.cfg.code_dim, -1),
                     z_id=rig.target.codes.z_id.detach().cpu().numpy(),
@@ -63,7 +69,6 @@ def dump(config: str | None, seed: int, checkpoint: str | None, out: str,
             item["E"] = reading(neutral, rig.basis)
             if suite != "real_rig":
                 item["E_true"] = reading(neutral, item["true"])
-        i = len({k.split("/")[0] for k in store})
         store.update({f"{i}/{k}": np.asarray(v) for k, v in item.items()})
 
     for suite in SUITES[:2]:

@@ -7,12 +7,14 @@ neutral surface is closer to the true shapes than any one of them. This script m
 tuning set's inversion cases (``rig_span/cases.py``'s cases, same seeds):
 
 per case it bakes the rig on the neutral as given (A0) and on ``--variants`` re-tessellations of
-it (each: one level of midpoint subdivision, quadric edge collapse back to about the neutral's
-vertex count, every vertex slid inside one of its triangles; a different random seed each), carries
+it (``--kind remesh``: one level of midpoint subdivision, quadric edge collapse back to about the
+neutral's vertex count, every vertex slid inside one of its triangles; ``jitter``: the slide alone,
+on the neutral's own faces; a different random seed each), carries
 each variant's shapes back to the neutral's vertices (closest point on the variant's surface,
 barycentric), and saves them beside the case.
 
-    python docs/results/weight_mae/tta/tta.py --seed 100 --variants 8 --out runs/tta/v8_100.npz
+    python docs/results/weight_mae/tta/tta.py --seed 100 --variants 8 --checkpoint runs/stage22.pt --out runs/tta/v8_100.npz
+    python docs/results/weight_mae/tta/tta.py --seed 100 --variants 4 --kind jitter --out runs/tta/j4_100.npz
     python docs/results/weight_mae/tta/tta.py --report runs/tta/v8_10{0,1,2,3,4}.npz
 
 The report gives, per suite, the median relative error of the baked shapes and invert's weight
@@ -81,40 +83,20 @@ def closest_barycentric(points: np.ndarray, vertices: np.ndarray, faces: np.ndar
 
 
 def dump(seed: int, checkpoint: str | None, out: str, n_variants: int, kind: str = "remesh") -> None:
-    from retarget.api import Retargeter
-    from retarget.evaluate import EvalData, NetworkMethod, arkit_ict_matrix, load_eval_config
+    """``rig_span/cases.py``'s cases of the tuning seed ``seed``, each with ``A_var``
+    (n_variants, 53, 3V): the rig baked on each variant, carried back to the neutral's vertices."""
     from retarget.mesh import Mesh
 
-    cfg = load_eval_config("configs/eval/study.yaml")
-    cfg["seed"] = seed
-    data = EvalData(cfg)
-    r = Retargeter.load(checkpoint)
-    method = NetworkMethod("network", r, "refine")
-    store = {}
-
-    def put(suite, case, extra=None):
-        frames, neutral = method._source(case)
-        z = r.encode(frames, source_neutral=neutral)
-        rig = r.source_rig(neutral)
-        variants = []
+    def variants(r, neutral, index):
+        out = []
         for j in range(n_variants):
-            vv, vf = retessellate(neutral.vertices, neutral.faces, 1000 * seed + 97 * j + len(store), kind)
+            vv, vf = retessellate(neutral.vertices, neutral.faces, 1000 * seed + 97 * j + index, kind)
             a = r.source_rig(Mesh(vv, vf)).basis.reshape(53, -1, 3)
             face, bary = closest_barycentric(np.asarray(neutral.vertices, np.float64), vv, vf)
-            variants.append(np.einsum("kvcd,vc->kvd", a[:, vf[face]], bary).reshape(53, -1))
-        item = dict(suite=suite, A=rig.basis, A_var=np.stack(variants), neutral=rig.baked.neutral,
-                    frames=np.stack([f.vertices for f in frames]), w0=z[:, :53],
-                    gt=case.source_weights, true=case.source.deltas.reshape(len(case.source.deltas), -1),
-                    **(extra or {}))
-        i = len({key.split("/")[0] for key in store})
-        store.update({f"{i}/{key}": np.asarray(v) for key, v in item.items()})
+            out.append(np.einsum("kvcd,vc->kvd", a[:, vf[face]], bary).reshape(53, -1))
+        return {"A_var": np.stack(out)}
 
-    for suite in rig_cases.SUITES[:2]:
-        for case in data.cases(suite):
-            put(suite, case)
-    put("real_rig", data.real_cases()["sampled"]["invert"],
-        {"arkit_ict": arkit_ict_matrix(data.real_rig().names)})
-    np.savez_compressed(out, **store)
+    rig_cases.dump(None, seed, checkpoint, out, more=variants)
 
 
 def relative_error(case: dict, shapes: np.ndarray) -> float:
