@@ -43,7 +43,8 @@ from nets.model import NFSModel, TargetCodes, weights_to_code
 
 from .canonical import Canonicaliser, upright_rotation
 from .checkpoint import checkpoint_code_map, load_checkpoint, model_from_checkpoint
-from .code_map import check_code_map, check_gate, check_per_head, head_code_map
+from .code_map import (check_code_map, check_gate, check_map_error, check_per_head, code_metric,
+                       head_code_map, head_map_error)
 from .decimate import cluster_decimate, cluster_means
 from .errors import RetargetError
 from .eyes import Eyes, find_eyes, gaze_from_weights, weights_from_gaze
@@ -316,7 +317,9 @@ class SourceRig:
     decoder also free_basis:
     F (code_dim − 53, 3V) float32, the rig's columns of the free dims of z_GE (source units),
     and its factor free_chol with ridge free_ridge (``fit_free``, prior ``free_prior``); None for
-    the MLP decoder. Made once per neutral.
+    the MLP decoder. fit_basis Q (53, 3V) float32 and fit_gram (53, 53) float64: what ``fit``
+    weighs a frame by when the rig's expected error is known (``retarget.code_map.code_metric``;
+    None: A and AᵀA, the plain least squares). Made once per neutral.
     """
 
     target: Target
@@ -326,6 +329,8 @@ class SourceRig:
     free_basis: np.ndarray | None = None
     free_chol: np.ndarray | None = None
     free_ridge: float = 0.0
+    fit_basis: np.ndarray | None = None
+    fit_gram: np.ndarray | None = None
     factors: dict = field(default_factory=dict)
 
     @cached_property
@@ -339,13 +344,20 @@ class SourceRig:
 
     @classmethod
     def make(cls, target: Target, baked: BakedRig, free: np.ndarray | None = None,
-             free_prior: float = 1e-3) -> "SourceRig":
-        """free: (code_dim − 53, V, 3) the basis decoder's shapes of the free dims in source units."""
+             free_prior: float = 1e-3, metric: tuple | None = None) -> "SourceRig":
+        """free: (code_dim − 53, V, 3) the basis decoder's shapes of the free dims in source units.
+        metric: (code_basis (code_dim, V, 3) every code dim's shape in source units, the head's
+        error moment Σ (code_dim, code_dim), ρ) for ``fit`` to weigh frames by the rig's expected
+        error (``retarget.code_map.code_metric``), or None."""
         a = np.ascontiguousarray(baked.deltas.reshape(N_FACS, -1), np.float32)   # Aᵀ (53, 3V)
         rig = cls(target, baked, a, _gram(a))
         if free is not None:
             rig.free_basis = np.ascontiguousarray(free.reshape(len(free), -1), np.float32)
             rig.free_chol, rig.free_ridge = _ridge_factor(_gram(rig.free_basis), free_prior)
+        if metric is not None:
+            code_basis, sigma, rho = metric
+            rig.fit_basis, rig.fit_gram = code_metric(code_basis.reshape(len(code_basis), -1), a,
+                                                      sigma, rho)
         return rig
 
     def fit_free(self, frame: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -390,7 +402,8 @@ class SourceRig:
     def fit(self, frame: np.ndarray, w0: np.ndarray, prior: float, sparsity: float = 0.0,
             reweight: tuple = (), balance: float = 0.0, dense: tuple = ()) -> np.ndarray:
         """Weights (53,) in [0,1] minimising |neutral + w·deltas − frame|² + Σ_k λ_k (w_k − w0_k)² +
-        Σ_k μ_k w_k, λ_k = prior · s_k, μ_k = sparsity · s_k (an L1 pull towards 0, which on
+        Σ_k μ_k w_k (with the rig's expected error known, the first term weighed by it:
+        ``fit_basis``, ``fit_gram``), λ_k = prior · s_k, μ_k = sparsity · s_k (an L1 pull towards 0, which on
         w ≥ 0 is linear), s_k = ``pull_scales(AᵀA, balance)``: with ``balance`` 0 the mean
         diag(AᵀA) for every weight, with 0.5 the geometric mean of that and shape k's own |B̂_k|²,
         so that a small shape (a brow, an eye look) is pulled less than a large one (docs/RESULTS.md,
@@ -411,14 +424,16 @@ class SourceRig:
         where a pull towards 0 only shrinks weights the frame needs; it is fitted again without
         the L1 pull, with that ``prior`` and ``balance`` (docs/RESULTS.md, "Frames that move many
         shapes: fitted again without the pull towards 0"). () = off."""
+        gram = self.gram if self.fit_gram is None else self.fit_gram
         key = (prior, balance)
         if key not in self.factors:
-            scales = pull_scales(self.gram, balance)
+            scales = pull_scales(gram, balance)
             ridge = prior * scales + 1e-12
-            self.factors[key] = (np.linalg.cholesky(self.gram + np.diag(ridge)).T, ridge, scales)
+            self.factors[key] = (np.linalg.cholesky(gram + np.diag(ridge)).T, ridge, scales)
         chol, ridge, scales = self.factors[key]
         b = (np.asarray(frame, np.float32) - self.baked.neutral).reshape(-1)
-        h = (self.basis @ b).astype(np.float64) + ridge * w0
+        shapes = self.basis if self.fit_basis is None else self.fit_basis
+        h = (shapes @ b).astype(np.float64) + ridge * w0
         w = self._bounded_solve(chol, h, sparsity, scales)
         if reweight:
             mu_max, eps, passes = reweight
@@ -494,6 +509,11 @@ class Retargeter:
     REFINE_INVERT_FITS = {True: (REFINE_PRIOR_INVERT, REFINE_SPARSITY_INVERT, REFINE_REWEIGHT_INVERT,
                                  REFINE_BALANCE_INVERT, REFINE_DENSE_INVERT),
                           False: (0.1, 0.02, (0.1, 0.05, 2), 0.0, ())}
+    #: invert's fit weighs each frame by its rig's expected error when the model holds the code
+    #: map's error moments (``SourceRig.fit``, ``retarget.code_map.code_metric``): ρ, the share
+    #: of white noise beside that error (None: the plain least squares; docs/RESULTS.md,
+    #: "Invert's fit weighed by the rig's expected error"). Read when a source's rig is baked.
+    REFINE_METRIC_RHO = 5.0
     REFINE_FREE_PRIOR = 1e-3
     REFINE_JOINT = True
     REFINE_JOINT_INVERT = False
@@ -507,17 +527,18 @@ class Retargeter:
                  chunk: int = 16384, cache_dir=None, source_cache_size: int = 8,
                  refine_steps: int = 0, code_map: np.ndarray | None = None,
                  code_map_gate: np.ndarray | None = None, code_map_per_head: tuple | None = None,
-                 upright: bool = True,
+                 code_map_error: np.ndarray | None = None, upright: bool = True,
                  face_only: bool = True, stabilise: bool = True, carry_jaw: bool = True,
                  turn_eyes: bool = True):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.model = model.to(self.device).eval()
         self.cfg = model.cfg
         self._source_rigs: dict[tuple, SourceRig] = {}
-        self._code_map_gate = self._code_map_per_head = None
+        self._code_map_gate = self._code_map_per_head = self._code_map_error = None
         self.code_map = code_map
         self.code_map_gate = code_map_gate
         self.code_map_per_head = code_map_per_head
+        self.code_map_error = code_map_error
         self.proxy_vertices = proxy_vertices
         self.chunk = chunk
         self.cache_dir = cache_dir
@@ -579,6 +600,22 @@ class Retargeter:
             raise RetargetError(str(e)) from None
         self._source_rigs.clear()
 
+    @property
+    def code_map_error(self) -> np.ndarray | None:
+        """The code map's error moments (K, code_dim, code_dim) float32 (K = 2: MakeHuman-like and
+        procedural heads, blended by the gate), or None: with them (and the map they were measured
+        on) invert's fit weighs each frame by its rig's expected error (``REFINE_METRIC_RHO``,
+        ``retarget.code_map.code_metric``). Setting it drops the source rigs baked so far."""
+        return self._code_map_error
+
+    @code_map_error.setter
+    def code_map_error(self, value) -> None:
+        try:
+            self._code_map_error = check_map_error(value, self.cfg)
+        except ValueError as e:
+            raise RetargetError(str(e)) from None
+        self._source_rigs.clear()
+
     def head_code_map(self, target) -> np.ndarray | None:
         """The code map of one prepared target (code_dim, 53) float32 (``retarget.code_map``:
         the map itself; with a per-head part, moved along the target's z_ID; with a gate, moved
@@ -600,10 +637,11 @@ class Retargeter:
                                     "train` or pass --checkpoint")
         path = Path(path)
         state = load_checkpoint(path)
-        code_map, gate, per_head = checkpoint_code_map(state)
+        code_map, gate, per_head, error = checkpoint_code_map(state)
         kwargs.setdefault("code_map", code_map)
         kwargs.setdefault("code_map_gate", gate)
         kwargs.setdefault("code_map_per_head", per_head)
+        kwargs.setdefault("code_map_error", error)
         return cls(model_from_checkpoint(state, path), device, **kwargs)
 
     # --------------------------------------------------------------------------- preparation
@@ -828,10 +866,17 @@ class Retargeter:
             target = self.prepare(source_neutral)
             while len(self._source_rigs) >= self.SOURCE_RIGS_KEPT:
                 self._source_rigs.pop(next(iter(self._source_rigs)))
-            free = (basis_shapes(target, slice(N_FACS, None))   # the basis decoder: the free
-                    if target.codes.basis is not None else None)  # dims' shapes too
-            self._source_rigs[key] = SourceRig.make(target, self.bake(target, parts=False), free,
-                                                    self.REFINE_FREE_PRIOR)
+            basis = target.codes.basis is not None         # the basis decoder: the free
+            code_basis = basis_shapes(target, slice(None)) if basis else None    # dims' shapes too
+            metric = None
+            if (basis and self.code_map is not None and self.code_map_error is not None
+                    and self.REFINE_METRIC_RHO is not None):    # the moments are the map's
+                sigma = head_map_error(self.code_map_error, self.code_map_gate,
+                                       target.codes.z_id.detach().cpu().numpy())
+                metric = (code_basis, sigma, float(self.REFINE_METRIC_RHO))
+            self._source_rigs[key] = SourceRig.make(
+                target, self.bake(target, parts=False),
+                None if code_basis is None else code_basis[N_FACS:], self.REFINE_FREE_PRIOR, metric)
         return self._source_rigs[key]
 
     def rest_vertices(self, source_neutral: Mesh) -> np.ndarray:

@@ -18,7 +18,7 @@ import torch
 from data_synth.facs import N_FACS
 from nets.model import NEUTRAL_CHANNEL_DIM, NFSConfig, NFSModel
 
-from .code_map import check_code_map, check_gate, check_per_head
+from .code_map import check_code_map, check_gate, check_map_error, check_per_head
 from .errors import RetargetError
 from .io import atomic_output, regular_file
 from .prepare import IMAGE_CHANNELS
@@ -95,7 +95,10 @@ def check_state(state: dict, path="checkpoint") -> None:
     for key, check, what in (("code_map", check_code_map, f"({cfg.code_dim}, {cfg.n_facs}) tensor "
                                                            "of a basis-decoder model"),
                              ("code_map_gate", check_gate, f"({cfg.code_dim + 1},) tensor beside a "
-                                                           "code_map")):
+                                                           "code_map"),
+                             ("code_map_error", check_map_error,
+                              f"symmetric (1 or 2, {cfg.code_dim}, {cfg.code_dim}) tensor beside a "
+                              "code_map")):
         if key not in state:
             continue
         ok = isinstance(state[key], torch.Tensor) and "code_map" in state   # a gate needs a map
@@ -122,21 +125,24 @@ def check_state(state: dict, path="checkpoint") -> None:
 
 
 def checkpoint_code_map(state: dict):
-    """The checked checkpoint's code map (code_dim, 53), its gate (code_dim + 1,) and its per-head
-    part (features (d + 1, code_dim), slopes (d, code_dim, 53)), float32 numpy arrays
-    (``retarget.code_map``); None for what it lacks."""
-    code_map, gate, features, slopes = (
+    """The checked checkpoint's code map (code_dim, 53), its gate (code_dim + 1,), its per-head
+    part (features (d + 1, code_dim), slopes (d, code_dim, 53)) and its error moments (K,
+    code_dim, code_dim), float32 numpy arrays (``retarget.code_map``); None for what it lacks."""
+    code_map, gate, features, slopes, error = (
         None if state.get(k) is None else state[k].detach().cpu().float().numpy()
-        for k in ("code_map", "code_map_gate", "code_map_features", "code_map_slopes"))
-    return code_map, gate, (None if features is None else (features, slopes))
+        for k in ("code_map", "code_map_gate", "code_map_features", "code_map_slopes",
+                  "code_map_error"))
+    return code_map, gate, (None if features is None else (features, slopes)), error
 
 
 def put_code_map(state: dict, code_map: np.ndarray, gate: np.ndarray | None,
-                 per_head: tuple | None = None) -> dict:
-    """``state`` with a code map (code_dim, 53), its gate (code_dim + 1,) or None (no gate) and its
-    per-head part (features, slopes) or None put in as the tensors ``checkpoint_code_map`` reads
-    back; returns ``state``."""
+                 per_head: tuple | None = None, error: np.ndarray | None = None) -> dict:
+    """``state`` with a code map (code_dim, 53), its gate (code_dim + 1,) or None (no gate), its
+    per-head part (features, slopes) or None and its error moments (K, code_dim, code_dim) or None
+    put in as the tensors ``checkpoint_code_map`` reads back; returns ``state``."""
     state["code_map"] = torch.from_numpy(np.asarray(code_map, np.float32))
+    if error is not None:
+        state["code_map_error"] = torch.from_numpy(np.asarray(error, np.float32))
     if gate is not None:
         state["code_map_gate"] = torch.from_numpy(np.asarray(gate, np.float32))
     if per_head is not None:

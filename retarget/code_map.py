@@ -34,6 +34,15 @@ held-out MakeHuman validation heads it takes the shapes' relative error from 0.2
 0.242 with d = 16 (each head's own best map: 0.203), which helps the realistic heads' weights a
 little and costs the procedural heads'; most of what is left is the mesh's, not the identity's:
 one head on three crops has identity codes further apart than two heads on one.
+
+What no map removes is each head's own error, and that has a shape too: the code error
+Δ_hk = m*_hk − M_h[:, k] of training head h's shape k (m*_hk the code that draws its true shape
+best, M_h the map the head gets) falls on some code directions far more than on others, and
+differently on MakeHuman and procedural heads. Its second moment Σ = E[Δ Δᵀ] (code_dim,
+code_dim), one per kind of head when the map is gated (``MapErrorFit``, checkpoint
+``code_map_error``), lets invert's fit weigh each direction of a frame's code by how far the
+head's rig can be trusted there (``code_metric``; docs/RESULTS.md, "Invert's fit weighed by the
+rig's expected error").
 """
 from __future__ import annotations
 
@@ -92,6 +101,20 @@ def check_gate(gate, cfg) -> np.ndarray | None:
         raise ValueError(f"a code map gate must be a finite ({cfg.code_dim + 1},) array; got shape "
                          f"{g.shape}")
     return g
+
+
+def check_map_error(error, cfg) -> np.ndarray | None:
+    """The code map's error moments (K, code_dim, code_dim), K = 1 or 2 (``MapErrorFit``), as a
+    float32 array (None stays None); ValueError unless finite, of that shape and symmetric."""
+    if error is None:
+        return None
+    e = np.asarray(error, np.float32)
+    if (e.ndim != 3 or e.shape[0] not in (1, 2) or e.shape[1:] != (cfg.code_dim, cfg.code_dim)
+            or not np.isfinite(e).all()
+            or not np.allclose(e, e.transpose(0, 2, 1), atol=1e-6 * max(float(np.abs(e).max()), 1e-30))):
+        raise ValueError(f"a code map's error must be a finite symmetric (K, {cfg.code_dim}, "
+                         f"{cfg.code_dim}) array, K = 1 or 2; got shape {e.shape}")
+    return e
 
 
 class CodeMapFit:
@@ -190,6 +213,88 @@ class HeadMapFit:
         return m0, (np.r_[mean[None], proj.T].astype(np.float32), slopes.astype(np.float32))
 
 
+class MapErrorFit:
+    """The second moment of the code map's error on training heads (module docstring), head by
+    head: its normal equations G = X Xᵀ (dims, dims), C = X Bᵀ (dims, 53), |B_k|² (53,), its
+    identity code and its group (0: MakeHuman, 1: procedural) are kept, since the map each head
+    gets is known only once the map and its gate are fitted."""
+
+    def __init__(self):
+        self.heads = []
+
+    def add(self, x: np.ndarray, b: np.ndarray, z_id: np.ndarray, group: int) -> None:
+        """One head: x (dims, n) the decoder's rig rows, b (53, n) the true shapes (a shape the rig
+        lacks is all zero), z_id (dims,) its identity code, group 0 or 1."""
+        x, b = np.asarray(x, np.float64), np.asarray(b, np.float64)
+        self.heads.append((x @ x.T, x @ b.T, (b ** 2).sum(1), np.asarray(z_id, np.float64), int(group)))
+
+    def solve(self, code_map: np.ndarray, gate: np.ndarray | None = None,
+              per_head: tuple | None = None, groups: int = 1) -> np.ndarray:
+        """Σ (groups, dims, dims) float32: per group, the mean over its heads h and their shapes k
+        (|B_hk| > 0) of Δ Δᵀ, Δ = m*_hk − M_h[:, k], m*_hk = (G_h + ε I)⁻¹ C_h[:, k] (ε = 10⁻⁶ of
+        G_h's mean diagonal) and M_h = ``head_code_map(code_map, gate, z_ID, per_head)``. With one
+        group every head counts in it."""
+        dims = len(code_map)
+        sums, counts = np.zeros((groups, dims, dims)), np.zeros(groups)
+        for gram, cross, norm2, z_id, group in self.heads:
+            g = min(group, groups - 1)
+            eps = 1e-6 * np.trace(gram) / dims
+            best = np.linalg.solve(gram + eps * np.eye(dims), cross)              # (dims, 53)
+            delta = (best - head_code_map(code_map, gate, z_id, per_head))[:, norm2 > 0]
+            sums[g] += delta @ delta.T
+            counts[g] += delta.shape[1]
+        if not counts.all():
+            raise ValueError("a code map's error needs heads of every group")
+        return (sums / counts[:, None, None]).astype(np.float32)
+
+
+def head_map_error(error: np.ndarray, gate: np.ndarray | None, z_id) -> np.ndarray:
+    """The code map's error moment Σ (code_dim, code_dim) float64 of one head for its identity
+    code z_id: the one moment, or with two (MakeHuman, procedural) and a gate p Σ_0 + (1 − p) Σ_1,
+    p = ``gate_probability``."""
+    error = np.asarray(error, np.float64)
+    if len(error) == 1 or gate is None:
+        return error[0]
+    p = gate_probability(gate, z_id)
+    return p * error[0] + (1.0 - p) * error[1]
+
+
+def code_metric(code_basis: np.ndarray, basis: np.ndarray, error: np.ndarray,
+                rho: float) -> tuple[np.ndarray, np.ndarray]:
+    """Invert's fit weighed by the rig's expected error (module docstring; ``SourceRig.fit``).
+
+    A frame b (3V,) is read through its code c = G⁻¹ X b (G = X Xᵀ, X = ``code_basis`` (dims, 3V)
+    the decoder's rig on the head), and the rig's 53 shapes ``basis`` A (53, 3V) = Mᵀ X through
+    their codes M = G⁻¹ X Aᵀ. The plain fit's |Aᵀw − b|² is, within the rig's span,
+    (c − M w)ᵀ G (c − M w). If the head's true shapes are drawn by codes M + Δ, Δ's columns of
+    second moment Σ = ``error`` (dims, dims), the frame's code misses M w by Δ w, and adding
+    white noise in vertex space (variance ∝ ``rho``) the residual's covariance is
+    C = Σ + ρ' G⁻¹, ρ' = rho · tr Σ / tr G⁻¹. The fit weighs it by W = C⁻¹ (scaled to G's
+    trace, so the fit's pulls keep their size; rho → ∞ gives the plain fit):
+
+        |w|² terms:  Mᵀ W M (53, 53),    the frame's term:  Mᵀ W G⁻¹ X b = Q b.
+
+    Returns (Q (53, 3V) float32, Mᵀ W M (53, 53) float64); for a mesh of fewer coordinates than
+    code dims (3V < dims, X's rows not independent) the plain (A, A Aᵀ)."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    x = np.asarray(code_basis, np.float64)
+    a = np.asarray(basis, np.float64)
+    if x.shape[1] < len(x):
+        return np.asarray(basis, np.float32), a @ a.T
+    gram = x @ x.T
+    g = cho_factor(gram + 1e-10 * np.trace(gram) / len(gram) * np.eye(len(gram)))
+    m = cho_solve(g, x @ a.T)                                           # (dims, 53)
+    g_inv = cho_solve(g, np.eye(len(gram)))
+    sigma = np.asarray(error, np.float64)
+    cov = sigma + rho * np.trace(sigma) / np.trace(g_inv) * g_inv
+    w = np.linalg.inv(0.5 * (cov + cov.T))
+    w *= np.trace(gram) / np.trace(w)
+    p = cho_solve(g, w @ m).T                                           # Mᵀ W G⁻¹ (53, dims)
+    fit_gram = m.T @ w @ m
+    return (p @ x).astype(np.float32), 0.5 * (fit_gram + fit_gram.T)
+
+
 def decoder_rows(r, rig) -> tuple[np.ndarray, np.ndarray]:
     """The basis decoder's rig on ``rig``'s neutral, every code dim's shape, (code_dim, 3V) in the
     rig's units, and the head's identity code z_ID (code_dim,) (``Retargeter.prepare``; whatever
@@ -270,20 +375,24 @@ def training_rigs(identities: int, seed: int = 0, n_segments: int = 20,
 
 
 def fit_code_map(r, identities: int, seed: int = 0, ridge: float = 0.01, gated: bool = False,
-                 features: int = 0) -> tuple[np.ndarray, np.ndarray | None, tuple | None]:
+                 features: int = 0) -> tuple[np.ndarray, np.ndarray | None, tuple | None, np.ndarray]:
     """The code map of the model of Retargeter ``r`` on ``training_rigs(identities, seed)``: (M
     (code_dim, 53) float32, gate (code_dim + 1,) float32 or None, per-head (features, slopes) or
     None). Ungated, M is fitted on both kinds of heads and drawn on every head. Gated, M is fitted
     on the MakeHuman heads only and the gate (``fit_gate``) on both kinds' identity codes, so that
     each head gets M as far as it is MakeHuman-like and the paper's map otherwise. With
-    ``features`` d > 0, M is a per-head map (``HeadMapFit``) fitted on the same heads."""
+    ``features`` d > 0, M is a per-head map (``HeadMapFit``) fitted on the same heads. The fourth
+    item is the map's error moment on the same heads (``MapErrorFit``): (2, code_dim, code_dim),
+    MakeHuman and procedural heads apart, when gated, else (1, code_dim, code_dim)."""
     fit = HeadMapFit() if features else CodeMapFit(r.cfg.code_dim)
+    errors = MapErrorFit()
     z_ids, labels = [], []
     for kind, rig in training_rigs(identities, seed, r.cfg.n_segments):
         rows, z_id = decoder_rows(r, rig)
         makehuman = kind == "makehuman"
+        b = np.asarray(rig.deltas).reshape(len(rig.deltas), -1)
+        errors.add(rows, b, z_id, 0 if makehuman else 1)
         if makehuman or not gated:
-            b = np.asarray(rig.deltas).reshape(len(rig.deltas), -1)
             if features:
                 fit.add(rows, b, z_id)
             else:
@@ -291,7 +400,5 @@ def fit_code_map(r, identities: int, seed: int = 0, ridge: float = 0.01, gated: 
         z_ids.append(z_id)
         labels.append(makehuman)
     gate = fit_gate(np.array(z_ids), np.array(labels)) if gated else None
-    if features:
-        m0, per_head = fit.solve(features, ridge)
-        return m0, gate, per_head
-    return fit.solve(ridge), gate, None
+    m, per_head = fit.solve(features, ridge) if features else (fit.solve(ridge), None)
+    return m, gate, per_head, errors.solve(m, gate, per_head, 2 if gated else 1)

@@ -511,9 +511,9 @@ class Trainer:
                 put_code_map(state, *self.fit_code_map())
             save_checkpoint(path, state)
 
-    def fit_code_map(self) -> tuple[np.ndarray, np.ndarray | None, tuple | None]:
-        """The code map (code_dim, 53) float32 of the model as it is now, its gate (or None) and
-        its per-head part (or None), on the config's ``code_map`` training identities
+    def fit_code_map(self) -> tuple[np.ndarray, np.ndarray | None, tuple | None, np.ndarray]:
+        """The code map (code_dim, 53) float32 of the model as it is now, its gate (or None), its
+        per-head part (or None) and its error moments, on the config's ``code_map`` training identities
         (``retarget.code_map.fit_code_map``); the model's mode is kept."""
         from .api import Retargeter
         from .code_map import fit_code_map

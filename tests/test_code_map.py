@@ -14,7 +14,8 @@ from nets.model import NFSConfig, NFSModel
 from retarget import FACS_NAMES
 from retarget.api import Retargeter, basis_shapes
 from retarget.checkpoint import load_checkpoint, save_checkpoint
-from retarget.code_map import CodeMapFit, HeadMapFit, fit_gate, gate_probability, head_code_map
+from retarget.code_map import (CodeMapFit, HeadMapFit, MapErrorFit, code_metric, fit_gate, gate_probability,
+                               head_code_map, head_map_error)
 from retarget.errors import RetargetError
 from retarget.mesh import Mesh
 from retarget.train import Trainer, load_config
@@ -179,9 +180,12 @@ def test_training_fits_the_map_into_the_exported_model(tmp_path):
     assert np.abs(m - np.eye(128, 53)).max() > 1e-3      # fitted, not the paper's map
     assert "code_map" not in load_checkpoint(tmp_path / "run" / "last.pt")
     assert trainer.model.training                          # the fit leaves the model training
-    again, gate, per_head = trainer.fit_code_map()
+    again, gate, per_head, error = trainer.fit_code_map()
     np.testing.assert_allclose(again, m, rtol=1e-5, atol=1e-6)                   # deterministic
     assert gate is None and per_head is None and "code_map_gate" not in load_checkpoint(tmp_path / "run" / "model.pt")
+    held = load_checkpoint(tmp_path / "run" / "model.pt")["code_map_error"].numpy()
+    assert error.shape == held.shape == (1, 128, 128)                            # ungated: one moment
+    np.testing.assert_allclose(error, held, rtol=1e-4, atol=1e-7)
 
 
 def test_a_map_needs_the_basis_decoder_in_the_config(tmp_path):
@@ -263,8 +267,11 @@ def test_training_fits_a_gated_map(tmp_path):
     Trainer(cfg, tmp_path / "run", progress=False).run()
     state = load_checkpoint(tmp_path / "run" / "model.pt")
     assert state["code_map"].shape == (128, 53) and state["code_map_gate"].shape == (129,)
+    assert state["code_map_error"].shape == (2, 128, 128)      # MakeHuman and procedural heads
     r = Retargeter.load(tmp_path / "run" / "model.pt", device="cpu")
     assert r.code_map_gate is not None and np.isfinite(r.code_map_gate).all()
+    eig = np.linalg.eigvalsh(r.code_map_error.astype(np.float64))
+    assert (eig > -1e-6 * eig.max()).all()                       # second moments: no negative direction
 
 
 # ------------------------------------------------------------------------------- the commands
@@ -421,3 +428,102 @@ def test_training_fits_a_per_head_map(tmp_path):
     assert state["code_map_gate"].shape == (129,)
     r = Retargeter.load(tmp_path / "run" / "model.pt", device="cpu")
     assert r.code_map_per_head is not None and r.code_map_gate is not None
+
+
+# ------------------------------------------------------------------------------- the map's error
+def test_the_maps_error_moment_is_that_of_the_codes_each_head_misses_by():
+    rng = np.random.default_rng(5)
+    dims, n = 6, 40
+    m = np.eye(dims, 53) + 0.1 * rng.normal(size=(dims, 53))
+    fit, deltas = MapErrorFit(), {0: [], 1: []}
+    for h in range(6):
+        x = rng.normal(size=(dims, n))
+        delta = rng.normal(size=(dims, 53)) * (0.3 if h % 2 else 0.05)
+        b = (m + delta).T @ x
+        b[7] = 0.0                                     # a shape this rig lacks: not counted
+        fit.add(x, b, rng.normal(size=dims), h % 2)
+        deltas[h % 2].append(np.delete(delta, 7, axis=1))
+    two = fit.solve(m.astype(np.float32), groups=2)
+    for g in (0, 1):
+        d = np.concatenate(deltas[g], axis=1)
+        np.testing.assert_allclose(two[g], d @ d.T / d.shape[1], rtol=1e-3, atol=1e-6)
+    assert np.trace(two[1]) > 10 * np.trace(two[0])
+    one = fit.solve(m.astype(np.float32), groups=1)
+    np.testing.assert_allclose(one[0], (two[0] + two[1]) / 2, rtol=1e-3, atol=1e-6)
+    # a head gets the moment of its kind as far as the gate says it is of that kind
+    gate = np.r_[np.zeros(dims), -np.log(3.0)]                  # p = 1/4 for every head
+    np.testing.assert_allclose(head_map_error(two, gate, np.zeros(dims)), 0.25 * two[0] + 0.75 * two[1],
+                               rtol=1e-5)
+    np.testing.assert_array_equal(head_map_error(one, gate, np.zeros(dims)), one[0].astype(np.float64))
+
+
+def test_weighing_the_fit_by_the_rigs_expected_error_reads_weights_closer():
+    rng = np.random.default_rng(0)
+    dims, n = 12, 90
+    x = rng.normal(size=(dims, n)) * np.linspace(0.3, 3.0, dims)[:, None]
+    m = np.eye(dims, 53)[:, :8] + 0.2 * rng.normal(size=(dims, 8))
+    a = m.T @ x                                                         # the baked rig (8 shapes)
+    # the head's true shapes miss the baked ones along a few code directions only
+    u = np.linalg.qr(rng.normal(size=(dims, 3)))[0]
+    sigma = u @ np.diag([1.0, 0.5, 0.25]) @ u.T * 0.05
+    q, gram = code_metric(x, a, sigma, rho=1.0)
+    assert q.shape == a.shape and gram.shape == (8, 8)
+    np.testing.assert_allclose(gram, gram.T, atol=1e-12)
+    plain_err, weighed_err = [], []
+    for _ in range(200):
+        delta = np.linalg.cholesky(sigma + 1e-12 * np.eye(dims)) @ rng.normal(size=(dims, 8))
+        w = rng.uniform(0, 1, 8)
+        b = ((m + delta) @ w) @ x                                       # a frame of the true shapes
+        plain_err.append(np.abs(np.linalg.solve(a @ a.T, a @ b) - w).mean())
+        weighed_err.append(np.abs(np.linalg.solve(gram, q @ b) - w).mean())
+    assert np.mean(weighed_err) < 0.5 * np.mean(plain_err)
+    # with much white noise beside the rig's error the fit is the plain one
+    q_inf, gram_inf = code_metric(x, a, sigma, rho=1e9)
+    np.testing.assert_allclose(q_inf, a, rtol=1e-4, atol=1e-6 * np.abs(a).max())
+    np.testing.assert_allclose(gram_inf, a @ a.T, rtol=1e-4, atol=1e-6 * np.abs(a @ a.T).max())
+    # a mesh of fewer coordinates than code dims: the rig's rows are not independent, plain fit
+    q_few, gram_few = code_metric(x[:, :9], a[:, :9], sigma, rho=1.0)
+    np.testing.assert_allclose(q_few, a[:, :9], rtol=1e-6)
+    np.testing.assert_allclose(gram_few, a[:, :9] @ a[:, :9].T, rtol=1e-10)
+
+
+def test_invert_weighs_its_fit_when_the_model_holds_the_maps_error(rig, tmp_path):
+    model = basis_model()
+    neutral = Mesh(rig.neutral, rig.faces)
+    m = random_map(model.cfg.code_dim)
+    r = Retargeter(model, device="cpu", code_map=m, stabilise=False)
+    assert r.source_rig(neutral).fit_basis is None                      # no error held: plain
+    sigma = np.stack([np.eye(128), 2 * np.eye(128)]).astype(np.float32)
+    sigma[:, 60:, 60:] *= 10.0
+    r.code_map_error = sigma
+    src = r.source_rig(neutral)
+    code_basis = basis_shapes(r.prepare(neutral), slice(None))
+    q, gram = code_metric(code_basis.reshape(128, -1), src.basis, sigma[0], r.REFINE_METRIC_RHO)
+    np.testing.assert_allclose(src.fit_basis, q, rtol=1e-3, atol=1e-4 * np.abs(q).max())
+    w_true = np.random.default_rng(3).uniform(0.0, 0.3, 53).astype(np.float32)
+    frame = Mesh(src.baked.evaluate(w_true), rig.faces)
+    z = r.encode([frame], source_neutral=neutral)
+    weighed = r.invert_fit([frame], neutral, z)
+    # a frame the baked rig draws exactly is read alike by either fit
+    np.testing.assert_allclose(weighed[0], w_true, atol=0.02)
+    r.code_map = None                               # the moments are the map's: none without it
+    assert r.source_rig(neutral).fit_basis is None
+    r.code_map = m
+    assert r.source_rig(neutral).fit_basis is not None
+    r.REFINE_METRIC_RHO = None
+    r.code_map_error = sigma                                            # drops the rig: plain again
+    assert r.source_rig(neutral).fit_basis is None
+    # the checkpoint carries the moments; a bad one is refused naming the file
+    path = tiny_checkpoint(tmp_path / "basis.pt", decoder="basis", decoder_fourier=2)
+    state = load_checkpoint(path)
+    state["code_map"] = torch.from_numpy(m)
+    state["code_map_error"] = torch.from_numpy(sigma)
+    save_checkpoint(tmp_path / "with_error.pt", state)
+    np.testing.assert_array_equal(Retargeter.load(tmp_path / "with_error.pt", device="cpu").code_map_error,
+                                  sigma)
+    state["code_map_error"] = torch.zeros(2, 128, 127)
+    save_checkpoint(tmp_path / "bad_error.pt", state)
+    with pytest.raises(RetargetError, match=r"bad_error\.pt: the checkpoint's code_map_error"):
+        Retargeter.load(tmp_path / "bad_error.pt", device="cpu")
+    with pytest.raises(RetargetError, match="symmetric"):
+        r.code_map_error = np.triu(np.ones((1, 128, 128), np.float32))

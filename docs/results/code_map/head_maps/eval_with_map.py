@@ -37,7 +37,7 @@ def main():
 
     def with_per_head_map(state):
         """The map fitted here, with the checkpoint's gate when ``--gated``."""
-        return m0, checkpoint_code_map(state)[1] if args.gated else None, per_head
+        return m0, checkpoint_code_map(state)[1] if args.gated else None, per_head, None
 
     api.checkpoint_code_map = with_per_head_map
     if args.clip is not None:
