@@ -551,6 +551,14 @@ class Retargeter:
         self.carry_jaw = carry_jaw         # a target's lower teeth and tongue follow its jaw (``jaw_parts``)
         self.turn_eyes = turn_eyes         # a target's eyeballs turn with the gaze (``eyes``)
 
+    def _checked(self, check, value):
+        """``check(value, self.cfg)`` (one of ``retarget.code_map``'s checks of the map's parts),
+        its ValueError raised as a RetargetError."""
+        try:
+            return check(value, self.cfg)
+        except ValueError as e:
+            raise RetargetError(str(e)) from None
+
     @property
     def code_map(self) -> np.ndarray | None:
         """The code of each FACS shape, (code_dim, 53) float32, or None for the paper's [w, 0]
@@ -560,10 +568,7 @@ class Retargeter:
 
     @code_map.setter
     def code_map(self, value) -> None:
-        try:
-            self._code_map = check_code_map(value, self.cfg)
-        except ValueError as e:
-            raise RetargetError(str(e)) from None
+        self._code_map = self._checked(check_code_map, value)
         (self.REFINE_PRIOR_INVERT, self.REFINE_SPARSITY_INVERT, self.REFINE_REWEIGHT_INVERT,
          self.REFINE_BALANCE_INVERT, self.REFINE_DENSE_INVERT) = self.REFINE_INVERT_FITS[
             self._code_map is not None]
@@ -578,10 +583,7 @@ class Retargeter:
 
     @code_map_gate.setter
     def code_map_gate(self, value) -> None:
-        try:
-            self._code_map_gate = check_gate(value, self.cfg)
-        except ValueError as e:
-            raise RetargetError(str(e)) from None
+        self._code_map_gate = self._checked(check_gate, value)
         self._source_rigs.clear()
 
     @property
@@ -594,10 +596,7 @@ class Retargeter:
 
     @code_map_per_head.setter
     def code_map_per_head(self, value) -> None:
-        try:
-            self._code_map_per_head = check_per_head(value, self.cfg)
-        except ValueError as e:
-            raise RetargetError(str(e)) from None
+        self._code_map_per_head = self._checked(check_per_head, value)
         self._source_rigs.clear()
 
     @property
@@ -610,10 +609,7 @@ class Retargeter:
 
     @code_map_error.setter
     def code_map_error(self, value) -> None:
-        try:
-            self._code_map_error = check_map_error(value, self.cfg)
-        except ValueError as e:
-            raise RetargetError(str(e)) from None
+        self._code_map_error = self._checked(check_map_error, value)
         self._source_rigs.clear()
 
     def head_code_map(self, target) -> np.ndarray | None:

@@ -117,6 +117,14 @@ def check_map_error(error, cfg) -> np.ndarray | None:
     return e
 
 
+def normal_equations(x: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One head's normal equations for the map's fits: G = X Xᵀ (dims, dims), C = X Bᵀ (dims, 53)
+    and n = |B_k|² (53,), float64, from x (dims, n) the decoder's rig rows and b (53, n) the true
+    shapes (a shape the rig lacks is all zero)."""
+    x, b = np.asarray(x, np.float64), np.asarray(b, np.float64)
+    return x @ x.T, x @ b.T, (b ** 2).sum(1)
+
+
 class CodeMapFit:
     """The normal equations of the code map, accumulated head by head: per shape k, G_k = Σ_h
     X_h X_hᵀ / |B_hk|² (dims, dims), c_k = Σ_h X_h B_hkᵀ / |B_hk|² (dims,), over the heads with
@@ -130,12 +138,13 @@ class CodeMapFit:
     def add(self, x: np.ndarray, b: np.ndarray) -> None:
         """One head: x (dims, n) the decoder's rig rows (every code dim's shape, flattened), b (53, n)
         the true shapes in the same units and frame (a shape the rig lacks is all zero)."""
-        x = np.asarray(x, np.float64)
-        b = np.asarray(b, np.float64)
-        gram, norm2 = x @ x.T, (b ** 2).sum(1)
+        self.add_normal_equations(*normal_equations(x, b))
+
+    def add_normal_equations(self, gram, cross, norm2) -> None:
+        """One head by its ``normal_equations``: G (dims, dims), C (dims, 53), n (53,)."""
         for k in np.flatnonzero(norm2 > 0):
             self.gram[k] += gram / norm2[k]
-            self.cross[k] += x @ b[k] / norm2[k]
+            self.cross[k] += cross[:, k] / norm2[k]
             self.count[k] += 1
 
     def solve(self, ridge: float) -> np.ndarray:
@@ -164,8 +173,7 @@ class HeadMapFit:
     def add(self, x: np.ndarray, b: np.ndarray, z_id: np.ndarray) -> None:
         """One head: x (dims, n) the decoder's rig rows, b (53, n) the true shapes (a shape the rig
         lacks is all zero), z_id (dims,) its identity code."""
-        x, b = np.asarray(x, np.float64), np.asarray(b, np.float64)
-        self.add_normal_equations(z_id, x @ x.T, x @ b.T, (b ** 2).sum(1))
+        self.add_normal_equations(z_id, *normal_equations(x, b))
 
     def add_normal_equations(self, z_id, gram, cross, norm2) -> None:
         """One head by what the fit keeps of it: z_id (dims,), G (dims, dims), C (dims, 53),
@@ -225,8 +233,11 @@ class MapErrorFit:
     def add(self, x: np.ndarray, b: np.ndarray, z_id: np.ndarray, group: int) -> None:
         """One head: x (dims, n) the decoder's rig rows, b (53, n) the true shapes (a shape the rig
         lacks is all zero), z_id (dims,) its identity code, group 0 or 1."""
-        x, b = np.asarray(x, np.float64), np.asarray(b, np.float64)
-        self.heads.append((x @ x.T, x @ b.T, (b ** 2).sum(1), np.asarray(z_id, np.float64), int(group)))
+        self.add_normal_equations(*normal_equations(x, b), z_id, group)
+
+    def add_normal_equations(self, gram, cross, norm2, z_id, group: int) -> None:
+        """One head by its ``normal_equations`` G, C, n, its identity code and its group."""
+        self.heads.append((gram, cross, norm2, np.asarray(z_id, np.float64), int(group)))
 
     def solve(self, code_map: np.ndarray, gate: np.ndarray | None = None,
               per_head: tuple | None = None, groups: int = 1) -> np.ndarray:
@@ -390,13 +401,13 @@ def fit_code_map(r, identities: int, seed: int = 0, ridge: float = 0.01, gated: 
     for kind, rig in training_rigs(identities, seed, r.cfg.n_segments):
         rows, z_id = decoder_rows(r, rig)
         makehuman = kind == "makehuman"
-        b = np.asarray(rig.deltas).reshape(len(rig.deltas), -1)
-        errors.add(rows, b, z_id, 0 if makehuman else 1)
+        normal = normal_equations(rows, np.asarray(rig.deltas).reshape(len(rig.deltas), -1))
+        errors.add_normal_equations(*normal, z_id, 0 if makehuman else 1)
         if makehuman or not gated:
             if features:
-                fit.add(rows, b, z_id)
+                fit.add_normal_equations(z_id, *normal)
             else:
-                fit.add(rows, b)
+                fit.add_normal_equations(*normal)
         z_ids.append(z_id)
         labels.append(makehuman)
     gate = fit_gate(np.array(z_ids), np.array(labels)) if gated else None
