@@ -3,11 +3,15 @@ by the rig's expected error"): on the inversion cases of docs/results/weight_mae
 each case's rig gets the metric of ``retarget.code_map.code_metric`` from the checkpoint's error
 moments (``code_map_error``, each head's by its gate probability) and ρ, and the bundled fit
 (``Retargeter.REFINE_INVERT_FITS[True]``) runs on it through ``SourceRig.fit``. Prints one markdown
-row per ρ ("plain": no metric) of the weight MAE per suite (uniform rows in brackets); with
-``--swap`` the MakeHuman and procedural moments are given to the wrong heads (a control).
+row per ρ ("plain": no metric) of the weight MAE per suite (uniform rows in brackets), after a
+line with the moments' traces; with ``--swap`` the MakeHuman and procedural moments are given to
+the wrong heads (a control); with ``--against`` another checkpoint, how far its code map and gate
+are from this one's (the largest difference of an entry).
 
     python docs/results/weight_mae/metric/sweep.py --checkpoint retarget/checkpoints/default.pt runs/decstudy/s23_10{0,1,2,3,4}.npz
     python docs/results/weight_mae/metric/sweep.py --checkpoint retarget/checkpoints/default.pt runs/decstudy/val_s23.npz --rho plain 10 5 3
+    git show d86a049~1:retarget/checkpoints/default.pt > runs/stage23.pt
+    python docs/results/weight_mae/metric/sweep.py --checkpoint retarget/checkpoints/default.pt --against runs/stage23.pt
 """
 from __future__ import annotations
 
@@ -39,19 +43,27 @@ def weighed_fit(case: dict, sigma: np.ndarray | None, rho: float | None) -> np.n
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("cases", nargs="+")
+    ap.add_argument("cases", nargs="*")
     ap.add_argument("--checkpoint", required=True, help="the model the cases were dumped with")
-    ap.add_argument("--rho", nargs="+", default=["plain", "100", "10", "5", "3", "1", "0.3"])
+    ap.add_argument("--rho", nargs="*", default=["plain", "100", "10", "5", "3", "1", "0.3"])
     ap.add_argument("--swap", action="store_true", help="each head the other kind's moment")
+    ap.add_argument("--against", help="another checkpoint whose code map and gate to compare")
     args = ap.parse_args()
     from retarget.checkpoint import checkpoint_code_map, load_checkpoint
     from retarget.code_map import head_map_error
 
-    _, gate, _, error = checkpoint_code_map(load_checkpoint(args.checkpoint))
+    code_map, gate, _, error = checkpoint_code_map(load_checkpoint(args.checkpoint))
     if error is None:
         raise SystemExit(f"{args.checkpoint}: no code_map_error")
+    print(f"<!-- traces of the moments: {', '.join(f'{np.trace(e):.3f}' for e in error)} -->")
+    if args.against:
+        other_map, other_gate, _, _ = checkpoint_code_map(load_checkpoint(args.against))
+        print(f"<!-- against {args.against}: code map {np.abs(code_map - other_map).max():.2e}, "
+              f"gate {np.abs(gate - other_gate).max():.2e} -->")
     if args.swap:
         error = error[::-1]
+    if not args.cases:
+        return
     cases = load(*args.cases)
     sigmas = [head_map_error(error, gate, c["z_id"]) for c in cases]
     print("| ρ | " + " | ".join(SUITES) + " |\n| --- |" + " ---: |" * len(SUITES))
